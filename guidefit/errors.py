@@ -1,0 +1,32 @@
+"""Exception types of guidefit.
+
+Every error that reaches the command line is a :class:`GuidefitError`; its
+message is one line that names the file or field at fault, and its
+``exit_code`` is what the CLI returns (2 bad input or usage, 1 a check or an
+identification that failed on valid input). The input errors also subclass
+:class:`ValueError` so library users can catch them as such.
+"""
+
+
+class GuidefitError(Exception):
+    """Base of every guidefit error; ``str(err)`` is a single line."""
+
+    exit_code = 2
+
+
+class GuideError(GuidefitError, ValueError):
+    """A guide definition (catalogue entry or TOML file) is invalid."""
+
+
+class RecordingError(GuidefitError, ValueError):
+    """A recording file does not follow the recording contract."""
+
+
+class ModelError(GuidefitError, ValueError):
+    """The model cannot be evaluated for the given inputs (e.g. load beyond capacity)."""
+
+
+class IdentificationError(GuidefitError):
+    """Valid input, but no result can be trusted (no mode found, all hits rejected)."""
+
+    exit_code = 1
