@@ -1,0 +1,293 @@
+"""Guide catalogue: the geometry, inertia and contact data of a guideway carriage.
+
+A guide is read from a TOML file with the sections ``[carriage]``, ``[rows]``,
+``[contact]`` and ``[points]`` (see ``data/MRB35.toml`` for the built-in MR 35
+roller carriage of the paper's Table 1). Field names carry their SI unit
+(``mass_kg``, ``h1_m``, ``contact_angle_deg``); a value may be a number in that
+unit or a string with an explicit unit (``"32 mm"``, ``"2200 g"``), which is
+converted. A field with no unit in its name and no unit in its value, a
+missing or negative field, and an unknown field are errors that name the field.
+
+Examples
+--------
+>>> from guidefit.model.guides import load_guide
+>>> guide = load_guide("MRB35")
+>>> guide.mass_kg, guide.rollers_per_row
+(2.2, 21)
+>>> round(guide.h3_m, 4)
+0.0342
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field, replace
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from guidefit.errors import GuideError
+
+# Unit conversions to SI for string values such as "32 mm".
+_UNIT_FACTORS = {
+    "m": {"m": 1.0, "mm": 1e-3, "um": 1e-6, "µm": 1e-6, "cm": 1e-2},
+    "kg": {"kg": 1.0, "g": 1e-3},
+    "kg_m2": {"kg m^2": 1.0, "kg*m^2": 1.0, "kg m2": 1.0, "kg mm^2": 1e-6, "g mm^2": 1e-9},
+    "deg": {"deg": 1.0, "rad": 180.0 / math.pi},
+    "n_per_m": {"N/m": 1.0, "N/um": 1e6, "N/µm": 1e6, "N/mm": 1e3},
+}
+
+# Field specification: section -> field -> (unit key or None, kind, required).
+# kind: "pos" > 0, "nonneg" >= 0, "vec3" 3 finite numbers, "pos3" 3 positive numbers,
+# "int" positive integer, "frac" in (0, 1], or a tuple of allowed strings.
+_SPEC: dict[str, dict[str, tuple]] = {
+    "carriage": {
+        "mass_kg": ("kg", "pos", True),
+        "inertia_kg_m2": ("kg_m2", "pos3", True),
+        "center_of_mass_m": ("m", "vec3", False),
+    },
+    "rows": {
+        "e_m": ("m", "pos", True),
+        "e_convention": (None, ("half", "full"), False),
+        "h1_m": ("m", "nonneg", True),
+        "h0_m": ("m", "pos", True),
+        "contact_angle_deg": ("deg", "pos", True),
+        "arrangement": (None, ("O", "X"), False),
+        "rollers_per_row": (None, "int", True),
+        "roller_span_m": ("m", "nonneg", True),
+        "effective_roller_fraction": (None, "frac", False),
+    },
+    "contact": {
+        "roller_stiffness_n_per_m": ("n_per_m", "pos", True),
+        "roller_diameter_m": ("m", "pos", False),
+        "roller_length_m": ("m", "pos", False),
+        "preload_m": ("m", "nonneg", False),
+        "contact_law": (None, ("palmgren",), False),
+    },
+}
+_TOP_LEVEL = {"name", "description", "carriage", "rows", "contact", "points"}
+_DEFAULTS = {
+    "center_of_mass_m": (0.0, 0.0, 0.0),
+    "e_convention": "half",
+    "arrangement": "O",
+    "effective_roller_fraction": 1.0,
+    "roller_diameter_m": None,
+    "roller_length_m": None,
+    "preload_m": 0.0,
+    "contact_law": "palmgren",
+}
+
+
+@dataclass(frozen=True)
+class Guide:
+    """A guideway carriage: inertia, roller-row geometry, contact data, measuring points.
+
+    All quantities SI. Row geometry follows the paper's Eq. (9): rows 1, 2 at
+    depth ``h1_m`` below the load point, rows 3, 4 at ``h3_m = h1_m + h0_m``,
+    laterally at ``-/+ row_offset_m``.
+    """
+
+    name: str
+    description: str
+    mass_kg: float
+    inertia_kg_m2: tuple[float, float, float]
+    center_of_mass_m: tuple[float, float, float]
+    e_m: float
+    e_convention: str
+    h1_m: float
+    h0_m: float
+    contact_angle_deg: float
+    arrangement: str
+    rollers_per_row: int
+    roller_span_m: float
+    effective_roller_fraction: float
+    roller_stiffness_n_per_m: float
+    roller_diameter_m: float | None
+    roller_length_m: float | None
+    preload_m: float
+    contact_law: str
+    measuring_points_m: dict[str, tuple[float, float, float]] = field(default_factory=dict)
+    source: str = "builtin"
+
+    @property
+    def h3_m(self) -> float:
+        """Depth of the lower rows below the load point, h3 = h1 + h0 (m)."""
+        return self.h1_m + self.h0_m
+
+    @property
+    def row_offset_m(self) -> float:
+        """Lateral distance of each row from the centre line (m), per ``e_convention``."""
+        return self.e_m if self.e_convention == "half" else 0.5 * self.e_m
+
+    @property
+    def contact_angle_rad(self) -> float:
+        """Contact angle beta in radians."""
+        return math.radians(self.contact_angle_deg)
+
+    @property
+    def effective_rollers_per_row(self) -> float:
+        """Z_L times the effective fraction (rollers that carry load)."""
+        return self.rollers_per_row * self.effective_roller_fraction
+
+    def roller_positions_z_m(self) -> np.ndarray:
+        """Axial positions l_i of the rollers of one row (m), centred on z = 0 (Eq. 9)."""
+        n = self.rollers_per_row
+        if n == 1:
+            return np.zeros(1)
+        return np.linspace(-0.5 * self.roller_span_m, 0.5 * self.roller_span_m, n)
+
+    def with_changes(self, **changes) -> Guide:
+        """Return a copy with some fields replaced (validated like a file)."""
+        new = replace(self, **changes)
+        _check_physical(new, new.source)
+        return new
+
+    def to_frame(self):
+        """The guide's fields as a two-column table (field, value)."""
+        import pandas as pd
+
+        rows = [(k, v) for k, v in self.__dict__.items() if k != "measuring_points_m"]
+        rows += [(f"point_{k}_m", v) for k, v in self.measuring_points_m.items()]
+        return pd.DataFrame(rows, columns=["field", "value"])
+
+
+def builtin_guides() -> list[str]:
+    """Names of the guides shipped with guidefit.
+
+    >>> "MRB35" in builtin_guides()
+    True
+    """
+    folder = resources.files("guidefit.model") / "data"
+    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
+
+
+def load_guide(name_or_path: str | Path) -> Guide:
+    """Load a built-in guide by name (``"MRB35"``) or a user's guide TOML file.
+
+    Raises
+    ------
+    GuideError
+        One line naming the file and the field at fault.
+    """
+    text_path = str(name_or_path)
+    if text_path.upper() in {g.upper() for g in builtin_guides()} and not Path(text_path).is_file():
+        canonical = next(g for g in builtin_guides() if g.upper() == text_path.upper())
+        resource = resources.files("guidefit.model") / "data" / f"{canonical}.toml"
+        return _parse(resource.read_text(encoding="utf-8"), f"builtin guide {canonical}", "builtin")
+    path = Path(text_path)
+    if not path.is_file():
+        known = ", ".join(builtin_guides())
+        raise GuideError(f"guide '{text_path}': not a built-in guide ({known}) and no such file")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise GuideError(f"{path}: cannot read guide file ({exc.__class__.__name__})") from None
+    return _parse(text, str(path), str(path))
+
+
+def _parse(text: str, where: str, source: str) -> Guide:
+    import tomllib
+
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise GuideError(f"{where}: not valid TOML ({exc})") from None
+    unknown = sorted(set(data) - _TOP_LEVEL)
+    if unknown:
+        raise GuideError(f"{where}: unknown field '{unknown[0]}'; allowed: {', '.join(sorted(_TOP_LEVEL))}")
+    values: dict = {"name": str(data.get("name", Path(where).stem)),
+                    "description": str(data.get("description", ""))}
+    for section, spec in _SPEC.items():
+        content = data.get(section)
+        if content is None:
+            raise GuideError(f"{where}: section [{section}] missing")
+        if not isinstance(content, dict):
+            raise GuideError(f"{where}: [{section}] must be a table")
+        for key in content:
+            if key not in spec:
+                hint = _suggest(key, spec)
+                raise GuideError(f"{where}: unknown field '{section}.{key}'{hint}")
+        for key, (unit, kind, required) in spec.items():
+            if key not in content:
+                if required:
+                    raise GuideError(f"{where}: field '{section}.{key}' missing")
+                values[key] = _DEFAULTS[key]
+                continue
+            values[key] = _convert(content[key], unit, kind, f"{where}: field '{section}.{key}'")
+    points = data.get("points", {})
+    if not isinstance(points, dict):
+        raise GuideError(f"{where}: [points] must be a table of name = [x, y, z]")
+    values["measuring_points_m"] = {
+        str(k): tuple(_convert(v, "m", "vec3", f"{where}: field 'points.{k}'")) for k, v in points.items()
+    }
+    guide = Guide(source=source, **values)
+    _check_physical(guide, where)
+    return guide
+
+
+def _suggest(key: str, spec: dict) -> str:
+    close = [k for k in spec if k.split("_")[0] == key.split("_")[0]]
+    return f"; did you mean '{close[0]}'?" if close else f"; allowed: {', '.join(spec)}"
+
+
+_QUANTITY = re.compile(r"^\s*([-+0-9.eE]+)\s*(.*?)\s*$")
+
+
+def _scalar(value, unit: str | None, what: str) -> float:
+    if isinstance(value, bool):
+        raise GuideError(f"{what}: expected a number, got {value!r}")
+    if isinstance(value, int | float):
+        number = float(value)
+    elif isinstance(value, str) and unit is not None:
+        match = _QUANTITY.match(value)
+        if not match:
+            raise GuideError(f"{what}: cannot read '{value}' as a number with a unit")
+        try:
+            number = float(match.group(1))
+        except ValueError:
+            raise GuideError(f"{what}: cannot read '{value}' as a number with a unit") from None
+        unit_text = match.group(2)
+        factors = _UNIT_FACTORS[unit]
+        if unit_text not in factors:
+            raise GuideError(f"{what}: unit '{unit_text}' not allowed here; use one of {', '.join(factors)}")
+        number *= factors[unit_text]
+    else:
+        raise GuideError(f"{what}: expected a number, got {value!r}")
+    if not math.isfinite(number):
+        raise GuideError(f"{what}: must be finite, got {value!r}")
+    return number
+
+
+def _convert(value, unit, kind, what):
+    if isinstance(kind, tuple):
+        if value not in kind:
+            raise GuideError(f"{what}: got {value!r}; allowed: {', '.join(kind)}")
+        return value
+    if kind in ("vec3", "pos3"):
+        if not isinstance(value, list) or len(value) != 3:
+            raise GuideError(f"{what}: expected a list of 3 numbers, got {value!r}")
+        vec = tuple(_scalar(v, unit, what) for v in value)
+        if kind == "pos3" and min(vec) <= 0:
+            raise GuideError(f"{what}: all three values must be positive, got {value!r}")
+        return vec
+    if kind == "int":
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            raise GuideError(f"{what}: expected a positive integer, got {value!r}")
+        return value
+    number = _scalar(value, unit, what)
+    if kind == "pos" and number <= 0:
+        raise GuideError(f"{what}: must be positive, got {value!r}")
+    if kind == "nonneg" and number < 0:
+        raise GuideError(f"{what}: must not be negative, got {value!r}")
+    if kind == "frac" and not 0 < number <= 1:
+        raise GuideError(f"{what}: must be in (0, 1], got {value!r}")
+    return number
+
+
+def _check_physical(guide: Guide, where: str) -> None:
+    if not 0 < guide.contact_angle_deg < 90:
+        raise GuideError(f"{where}: field 'rows.contact_angle_deg' must be in (0, 90), got {guide.contact_angle_deg}")
+    if guide.rollers_per_row > 1 and guide.roller_span_m <= 0:
+        raise GuideError(f"{where}: field 'rows.roller_span_m' must be positive for more than one roller")
