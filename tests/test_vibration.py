@@ -48,10 +48,13 @@ guides = st.builds(
 def test_closed_forms_eq15_to_23_equal_eigen_solution(guide):
     sol = vib.solve_modes(vib.model_from_guide(guide))
     closed = vib.closed_form_frequencies_hz(guide)
-    assert sorted(sol.frequencies_hz) == pytest.approx(sorted(closed.values()), rel=1e-9)
+    # the X arrangement can make the low roll mode nearly a mechanism (eigenvalue ~ 0):
+    # compare on the scale of the highest frequency
+    scale = max(closed.values())
+    assert sorted(sol.frequencies_hz) == pytest.approx(sorted(closed.values()), rel=1e-9, abs=1e-8 * scale)
     # labels: the decoupled modes are exactly where their closed forms say
     for label in ("vertical", "pitch", "yaw"):
-        assert any(abs(f - closed[label]) <= 1e-9 * f for f in sol.frequencies_hz)
+        assert any(abs(f - closed[label]) <= 1e-8 * scale for f in sol.frequencies_hz)
 
 
 @settings(max_examples=30, deadline=None)
