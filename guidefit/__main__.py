@@ -1,0 +1,5 @@
+"""``python -m guidefit`` runs the command line."""
+
+from guidefit.cli import main
+
+main()

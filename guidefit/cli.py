@@ -1,0 +1,101 @@
+"""The ``guidefit`` command line: thin click commands over the library.
+
+Each command parses its options, calls one library function and renders the
+result through :mod:`guidefit.report`. Heavy modules are imported inside the
+commands so that ``guidefit --help`` starts fast. Exit status: 0 success,
+1 a check or identification failed, 2 bad input or usage; errors are one line
+on stderr, never a traceback.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import click
+
+from guidefit import __version__
+
+
+class _Group(click.Group):
+    """A click group that turns guidefit errors into one-line messages and exit codes."""
+
+    def invoke(self, ctx):
+        from guidefit.errors import GuidefitError
+
+        try:
+            return super().invoke(ctx)
+        except GuidefitError as exc:
+            click.echo(f"guidefit: error: {exc}", err=True)
+            sys.exit(exc.exit_code)
+        except OSError as exc:
+            click.echo(f"guidefit: error: {exc.filename or ''}: {exc.strerror or exc}", err=True)
+            sys.exit(2)
+        except KeyboardInterrupt:
+            click.echo("guidefit: interrupted", err=True)
+            sys.exit(130)
+
+
+@click.group(cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="guidefit")
+def main():
+    """Joint stiffness and damping of linear rolling guideways from impact-hammer tests.
+
+    \b
+    guidefit predict --guide MRB35        analytic stiffness and natural frequencies
+    guidefit identify recording.h5        K_V, K_H, c_V, c_H from a hammer test
+    guidefit explain recording.h5         trace model-measurement residuals to a physical effect
+    """
+
+
+def _parse_load(text: str | None):
+    if text is None:
+        return None
+    parts = text.split(",")
+    try:
+        values = tuple(float(p) for p in parts)
+    except ValueError:
+        values = ()
+    if len(values) != 3:
+        raise click.BadParameter(f"expected FV,FH,M in N,N,N m (three numbers), got '{text}'", param_hint="--load")
+    return values
+
+
+@main.command()
+def guides():
+    """List the built-in guide catalogue."""
+    from guidefit import report
+    from guidefit.model.guides import builtin_guides, load_guide
+
+    report.print_guides([load_guide(name) for name in builtin_guides()])
+
+
+@main.command()
+@click.option("--guide", "guide_name", default="MRB35", show_default=True,
+              help="Built-in guide name or path to a guide TOML file.")
+@click.option("--load", "load_text", metavar="FV,FH,M",
+              help="Static load: vertical force N (positive presses the carriage onto the rail), "
+                   "lateral force N, roll moment N m.")
+@click.option("--sweep", is_flag=True, help="Static stiffness and frequencies over a load range.")
+@click.option("--calibration", type=click.Choice(["nominal", "law"]), default="nominal", show_default=True,
+              help="Roller stiffness: the guide's nominal K_n, or the contact law's own value.")
+@click.option("--json", "as_json", is_flag=True, help="Print machine-readable JSON.")
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False), help="Write a PNG plot.")
+def predict(guide_name, load_text, sweep, calibration, as_json, plot_path):
+    """Analytic stiffness (Eq. 1-4) and natural frequencies (Eq. 5-23) of a guide."""
+    from guidefit import report
+    from guidefit.model.guides import load_guide
+    from guidefit.predict import predict as run_predict
+    from guidefit.predict import predict_sweep
+
+    guide = load_guide(guide_name)
+    load = _parse_load(load_text)
+    if sweep:
+        frame = predict_sweep(guide, calibration=calibration, direction_load=load)
+        report.render_sweep(frame, as_json=as_json, plot_path=plot_path)
+        return
+    result = run_predict(guide, load=load, calibration=calibration)
+    report.render_prediction(result, as_json=as_json, plot_path=plot_path)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()

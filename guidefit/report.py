@@ -1,0 +1,168 @@
+"""Rendering: rich tables, JSON and plots. Display units live here, numerics do not."""
+
+from __future__ import annotations
+
+import json
+import math
+
+
+def _console(stderr: bool = False):
+    from rich.console import Console
+
+    return Console(stderr=stderr, highlight=False)
+
+
+def fmt(value, unit: str = "", digits: int = 4) -> str:
+    """Engineering display of a number: ``fmt(1.03e9, 'N/m') -> '1.030e+09 N/m'``.
+
+    >>> fmt(3529.03, "Hz")
+    '3529 Hz'
+    >>> fmt(None)
+    '-'
+    """
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return "-"
+    value = float(value)
+    if value != 0 and (abs(value) >= 1e5 or abs(value) < 1e-2):
+        text = f"{value:.{digits - 1}e}"
+    else:
+        text = f"{value:.{digits}g}"
+    return f"{text} {unit}".strip()
+
+
+def dump_json(obj) -> str:
+    """One-line JSON with NaN/inf written as null (strict JSON)."""
+
+    def clean(o):
+        if isinstance(o, float) and not math.isfinite(o):
+            return None
+        if isinstance(o, dict):
+            return {k: clean(v) for k, v in o.items()}
+        if isinstance(o, list | tuple):
+            return [clean(v) for v in o]
+        if hasattr(o, "item"):
+            return clean(o.item())
+        return o
+
+    return json.dumps(clean(obj))
+
+
+def print_guides(guides) -> None:
+    """Table of the catalogue."""
+    from rich.table import Table
+
+    table = Table(title="guide catalogue")
+    for col in ("name", "M (kg)", "rows at (mm)", "beta", "Z_L x span", "K_n (N/m)", "description"):
+        table.add_column(col)
+    for g in guides:
+        table.add_row(
+            g.name, f"{g.mass_kg:g}", f"+/-{g.row_offset_m * 1e3:g}, -{g.h1_m * 1e3:g}/-{g.h3_m * 1e3:g}",
+            f"{g.contact_angle_deg:g} deg", f"{g.rollers_per_row} x {g.roller_span_m * 1e3:g} mm",
+            fmt(g.roller_stiffness_n_per_m), g.description,
+        )
+    _console().print(table)
+
+
+def render_prediction(result, as_json: bool = False, plot_path: str | None = None) -> None:
+    """Print a :class:`guidefit.predict.Prediction` as a table or JSON; optional plot."""
+    data = result.to_dict()
+    if plot_path:
+        plot_prediction(result, plot_path)
+    if as_json:
+        print(dump_json(data))
+        return
+    from rich.table import Table
+
+    fv, fh, m = result.load
+    table = Table(title=f"{result.guide.name}: load F_V={fv:g} N, F_H={fh:g} N, M={m:g} N m "
+                        f"(calibration: {result.calibration})")
+    table.add_column("quantity")
+    table.add_column("value", justify="right")
+    table.add_column("equation")
+    st = data["stiffness"]
+    table.add_row("K_n (mean per roller)", fmt(st["K_n"]["value"], "N/m"), "Eq. (3)-(4)")
+    table.add_row("K_V", fmt(st["K_V"]["value"], "N/m"), "Eq. (2)")
+    table.add_row("K_H", fmt(st["K_H"]["value"], "N/m"), "Eq. (2)")
+    table.add_row("K_gamma", fmt(st["K_gamma"]["value"], "N m/rad"), "Eq. (2)")
+    eq = {"vertical": "Eq. (15)", "pitch": "Eq. (16)", "yaw": "Eq. (17)",
+          "roll_low": "Eq. (18)-(23)", "roll_high": "Eq. (18)-(23)"}
+    for mode in data["modes"]:
+        closed = data["closed_form_hz"].get(mode["label"])
+        note = eq.get(mode["label"], "assembled")
+        if closed is not None:
+            note += f" closed form {closed:.1f} Hz"
+        table.add_row(f"f {mode['label']}", f"{mode['frequency_hz']:.1f} Hz", note)
+    if data["rows_lifted"]:
+        table.add_row("rows lifted off", ", ".join(map(str, data["rows_lifted"])), "compression only")
+    _console().print(table)
+    if plot_path:
+        _console().print(f"plot written to {plot_path}")
+
+
+def render_sweep(frame, as_json: bool = False, plot_path: str | None = None) -> None:
+    """Print a load sweep (DataFrame) as a table or JSON lines; optional plot."""
+    if plot_path:
+        plot_sweep(frame, plot_path)
+    if as_json:
+        for row in frame.to_dict(orient="records"):
+            print(dump_json(row))
+        return
+    from rich.table import Table
+
+    table = Table(title="load sweep")
+    for col in frame.columns:
+        table.add_column(col, justify="right")
+    for row in frame.itertuples(index=False):
+        table.add_row(*(fmt(v) if isinstance(v, float) else str(v) for v in row))
+    _console().print(table)
+
+
+def _figure(n_rows: int = 1, n_cols: int = 1, size=(8, 5)):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt.subplots(n_rows, n_cols, figsize=size, squeeze=False)
+
+
+def plot_prediction(result, path: str) -> None:
+    """Load-deflection curves (the paper's Figure 3) and the mode frequencies."""
+    from guidefit.model import static
+
+    fig, axes = _figure(1, 2, (11, 4.5))
+    for direction, ax_label in (("V", "vertical"), ("H", "lateral")):
+        frame = static.load_deflection(result.guide, direction=direction, calibration=result.calibration)
+        axes[0, 0].plot(frame.iloc[:, 1] * 1e6, frame.iloc[:, 0] / 1e3, label=ax_label)
+    axes[0, 0].set_xlabel("displacement (um)")
+    axes[0, 0].set_ylabel("load (kN)")
+    axes[0, 0].set_title("load-deflection (Eq. 1-4)")
+    axes[0, 0].legend()
+    axes[0, 0].grid(True, alpha=0.3)
+    modes = result.modes
+    order = sorted(range(len(modes.labels)), key=lambda i: modes.frequencies_hz[i])
+    axes[0, 1].barh([modes.labels[i] for i in order], [modes.frequencies_hz[i] for i in order])
+    axes[0, 1].set_xlabel("natural frequency (Hz)")
+    axes[0, 1].set_title(f"{result.guide.name} modes (Eq. 5-23)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
+def plot_sweep(frame, path: str) -> None:
+    """Frequencies and stiffnesses against load."""
+    fig, axes = _figure(1, 2, (11, 4.5))
+    load = frame.iloc[:, 0]
+    for col in frame.columns:
+        if col.startswith("f_") and col.endswith("_hz"):
+            axes[0, 0].plot(load, frame[col], label=col[2:-3])
+        if col.startswith("K_") and "per_m" in col:
+            axes[0, 1].plot(load, frame[col], label=col)
+    axes[0, 0].set_xlabel(frame.columns[0])
+    axes[0, 0].set_ylabel("frequency (Hz)")
+    axes[0, 0].legend()
+    axes[0, 1].set_xlabel(frame.columns[0])
+    axes[0, 1].set_ylabel("stiffness")
+    axes[0, 1].set_yscale("log")
+    axes[0, 1].legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
