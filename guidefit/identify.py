@@ -1,0 +1,547 @@
+r"""From a hammer recording to K_V, K_H, c_V, c_H (the paper's Eq. 24-29).
+
+Pipeline per run: hits (:mod:`guidefit.hits`) -> averaged FRFs of every
+response channel (:mod:`guidefit.frf`) -> modes by a multi-channel curve fit
+(:mod:`guidefit.modes`) -> damping corrected for the exponential window ->
+each mode's motion at the sensors fitted as a rigid-body motion of the
+carriage and labelled by the motion that carries most of its kinetic energy
+(vertical v, pitch theta, yaw psi, roll u-phi). Across runs, each label keeps
+the estimate with the smallest frequency uncertainty.
+
+The joint parameters follow the paper's single-DOF reading of the vertical
+and horizontal (``roll_low``) modes, with M the carriage mass of the guide:
+
+* Eq. (24), (25): ``K = 4 pi^2 M f^2`` (:func:`stiffness_from_frequency`)
+* Eq. (26), (28): ``xi = (f2 - f1) / (2 f)`` (:func:`guidefit.modes.half_power`)
+* Eq. (27), (29): ``c = 4 pi M f xi`` (:func:`damping_from_frequency`)
+
+``f`` is the undamped natural frequency |p|/2pi of the curve fit and ``xi``
+its viscous damping ratio; the half-power values are reported beside them.
+Uncertainties (one standard deviation) combine the delete-a-group jackknife
+over hits with the fit's own standard error.
+
+Examples
+--------
+>>> round(stiffness_from_frequency(2.2, 3450.0) / 1e9, 3)
+1.034
+>>> round(damping_from_frequency(2.2, 3450.0, 0.0288))
+2747
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from guidefit.errors import IdentificationError
+
+JOINT_LABELS = {"V": "vertical", "H": "roll_low"}
+
+
+# --------------------------------------------------------------------------- Eq. (24)-(29)
+
+
+def stiffness_from_frequency(mass_kg: float, frequency_hz: float) -> float:
+    """Joint stiffness K = 4 pi^2 M f^2 (N/m), Eq. (24) vertical and Eq. (25) horizontal."""
+    return 4.0 * math.pi**2 * mass_kg * frequency_hz**2
+
+
+def damping_from_frequency(mass_kg: float, frequency_hz: float, damping_ratio: float) -> float:
+    """Joint damping c = 4 pi M f xi (N s/m), Eq. (27) vertical and Eq. (29) horizontal."""
+    return 4.0 * math.pi * mass_kg * frequency_hz * damping_ratio
+
+
+def joint_parameters(mass_kg: float, modes: dict) -> dict:
+    """The contract's ``parameters`` from the vertical and roll_low modes.
+
+    ``modes`` maps "V"/"H" to an :class:`IdentifiedMode` (or None). Standard
+    deviations propagate linearly: std_K = 2 K std_f / f;
+    std_c / c = sqrt((std_f/f)^2 + (std_xi/xi)^2).
+    """
+    out: dict = {}
+    for key in ("V", "H"):
+        mode = modes.get(key)
+        if mode is None:
+            for name, unit in ((f"f_{key}", "Hz"), (f"zeta_{key}", "1"), (f"K_{key}", "N/m"), (f"c_{key}", "N*s/m")):
+                out[name] = {"value": None, "unit": unit, "std": None}
+            continue
+        f, zeta = mode.frequency_hz, mode.damping_ratio
+        sf, sz = mode.frequency_std_hz, mode.damping_std
+        k = stiffness_from_frequency(mass_kg, f)
+        c = damping_from_frequency(mass_kg, f, zeta)
+        rel_f = sf / f if sf is not None else None
+        rel_z = sz / zeta if (sz is not None and zeta > 0) else None
+        out[f"f_{key}"] = {"value": f, "unit": "Hz", "std": sf}
+        out[f"zeta_{key}"] = {"value": zeta, "unit": "1", "std": sz}
+        out[f"K_{key}"] = {"value": k, "unit": "N/m", "std": None if rel_f is None else 2 * k * rel_f}
+        std_c = None
+        if rel_f is not None and rel_z is not None:
+            std_c = c * math.hypot(rel_f, rel_z)
+        out[f"c_{key}"] = {"value": c, "unit": "N*s/m", "std": std_c}
+    return out
+
+
+# --------------------------------------------------------------------------- results
+
+
+@dataclass(frozen=True)
+class IdentifySettings:
+    """Options of :func:`identify`; ``None`` means chosen from the data."""
+
+    estimator: str = "H1"
+    window: object = None  # guidefit.frf.WindowSettings
+    hits: object = None  # guidefit.hits.HitSettings
+    f_min_hz: float | None = None
+    f_max_hz: float | None = None
+    min_coherence: float = 0.9
+    min_accepted_hits: int = 3
+    jackknife: bool = True
+
+
+@dataclass(frozen=True)
+class IdentifiedMode:
+    """A measured mode with its label, uncertainty and motion at the sensors."""
+
+    label: str
+    run: str
+    frequency_hz: float
+    damping_ratio: float
+    frequency_std_hz: float | None
+    damping_std: float | None
+    model_frequency_hz: float | None
+    shape: dict  # channel -> modal constant (1/kg), real for normal modes
+    motion: tuple  # rigid-body motion (u, v, theta, psi, phi), unit norm
+    energy: dict  # kinetic-energy shares v, theta, psi, u_phi
+    coherence: float
+    half_power: dict | None = None
+    raw_damping_ratio: float | None = None
+
+    def to_dict(self) -> dict:
+        """JSON-ready; the contract's label/frequency_hz/damping_ratio plus extras."""
+        return {
+            "label": self.label,
+            "frequency_hz": self.frequency_hz,
+            "damping_ratio": self.damping_ratio,
+            "frequency_std_hz": self.frequency_std_hz,
+            "damping_std": self.damping_std,
+            "run": self.run,
+            "model_frequency_hz": self.model_frequency_hz,
+            "coherence": self.coherence,
+            "method": "curve_fit",
+            "damping_ratio_before_window_correction": self.raw_damping_ratio,
+            "half_power": self.half_power,
+            "shape": {k: float(np.real(v)) for k, v in self.shape.items()},
+        }
+
+
+@dataclass(frozen=True)
+class RunResult:
+    """One run's FRFs, hit table and fitted modes."""
+
+    name: str
+    frf: object  # guidefit.frf.FrfSet
+    hits: list
+    modes: list
+    excitation_direction: tuple
+    channels: list  # guidefit.recording.Channel of the responses, in FRF order
+    force_levels: list = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class Identification:
+    """The result of :func:`identify` for one recording."""
+
+    file: str
+    guide: object
+    runs: tuple
+    modes: tuple
+    parameters: dict
+    warnings: tuple
+    extra_modes: tuple = ()
+    missing_modes: tuple = ()
+
+    def to_dict(self) -> dict:
+        """The contract's JSON object (``identify --json``), with optional extra fields."""
+        return {
+            "file": self.file,
+            "guide": self.guide.name,
+            "parameters": self.parameters,
+            "modes": [m.to_dict() for m in self.modes],
+            "warnings": list(self.warnings),
+            "extra_modes": [m.to_dict() for m in self.extra_modes],
+            "missing_modes": list(self.missing_modes),
+            "hits": [row for run in self.runs for row in run.hits],
+            "sensors": [
+                {"name": ch.name, "position_m": [float(x) for x in ch.position_m],
+                 "direction": [float(x) for x in ch.direction]}
+                for ch in self._sensor_channels()
+            ],
+            "force_levels": [lvl for run in self.runs for lvl in run.force_levels],
+        }
+
+    def _sensor_channels(self):
+        seen = {}
+        for run in self.runs:
+            for ch in run.channels:
+                seen.setdefault(ch.name, ch)
+        return list(seen.values())
+
+    def to_frame(self):
+        """One row per parameter: name, value, unit, std."""
+        import pandas as pd
+
+        return pd.DataFrame(
+            [{"parameter": k, **v} for k, v in self.parameters.items()],
+            columns=["parameter", "value", "unit", "std"],
+        )
+
+    def summary_row(self) -> dict:
+        """One flat row for ``--csv``/``--summary`` (units in the column names)."""
+        units = {"Hz": "hz", "1": "1", "N/m": "n_per_m", "N*s/m": "ns_per_m"}
+        row = {"file": self.file, "guide": self.guide.name}
+        for name, p in self.parameters.items():
+            suffix = units.get(p["unit"], p["unit"])
+            row[f"{name}_{suffix}"] = p["value"]
+            row[f"{name}_std_{suffix}"] = p["std"]
+        row["n_warnings"] = len(self.warnings)
+        return row
+
+
+# --------------------------------------------------------------------------- shapes and labels
+
+
+def sensor_matrix(channels) -> np.ndarray:
+    """(n_channels, 5): each sensor's reading per unit carriage motion (u, v, theta, psi, phi)."""
+    from guidefit.model.vibration import rigid_body_map
+
+    return np.array([np.asarray(ch.direction, float) @ rigid_body_map(ch.position_m) for ch in channels])
+
+
+def real_shape(values) -> np.ndarray:
+    """Rotate complex modal constants to the real axis (best single phase) and return the real part."""
+    v = np.asarray(values, dtype=complex)
+    if not np.any(v):
+        return np.zeros(v.shape)
+    angle = 0.5 * np.angle(np.sum(v**2))
+    r = np.real(v * np.exp(-1j * angle))
+    return r
+
+
+def rigid_body_motion(shape, sensors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Least-squares carriage motion q (5,) behind a shape at the sensors, and which DOFs are observed."""
+    q, *_ = np.linalg.lstsq(sensors, shape, rcond=1e-8)
+    observed = np.linalg.norm(sensors, axis=0) > 0
+    rank_ok = np.linalg.matrix_rank(sensors) == 5
+    if not rank_ok:
+        # null-space DOFs are not observed: min-norm solution sets them to zero
+        _, s, vt = np.linalg.svd(sensors)
+        null = vt[np.sum(s > 1e-8 * s[0]):]
+        observed = np.abs(null).sum(axis=0) < 1e-8
+    return q, observed
+
+
+def energy_shares(q: np.ndarray, mass_matrix: np.ndarray) -> dict:
+    """Kinetic-energy shares of v, theta, psi and u+phi in a carriage motion."""
+    contrib = np.abs(q * (mass_matrix @ q))
+    total = contrib.sum() or 1.0
+    return {"v": contrib[1] / total, "theta": contrib[2] / total, "psi": contrib[3] / total,
+            "u_phi": (contrib[0] + contrib[4]) / total}
+
+
+_GROUP_LABEL = {"v": "vertical", "theta": "pitch", "psi": "yaw"}
+
+
+def label_modes(candidates: list[dict], model) -> list[str]:
+    """Labels for one run's modes from their energy shares (dicts with 'energy', 'frequency_hz', 'q').
+
+    Each of vertical/pitch/yaw goes to the mode of that motion nearest to the
+    model's frequency; the u-phi modes become roll_low (the lowest one whose
+    lateral translation dominates, i.e. lateral sensors in phase) and
+    roll_high (the highest phi-dominated one); the rest are ``extra``.
+    """
+    labels = ["extra"] * len(candidates)
+    groups: dict[str, list[int]] = {}
+    for i, c in enumerate(candidates):
+        g = max(c["energy"], key=c["energy"].get)
+        groups.setdefault(g, []).append(i)
+    for g, label in _GROUP_LABEL.items():
+        members = groups.get(g, [])
+        if members:
+            f_model = model.frequency_hz(label)
+            best = min(members, key=lambda i: abs(math.log(candidates[i]["frequency_hz"] / f_model)))
+            labels[best] = label
+    uphi = sorted(groups.get("u_phi", []), key=lambda i: candidates[i]["frequency_hz"])
+    if uphi:
+        m_u = [abs(candidates[i]["u_energy"]) >= abs(candidates[i]["phi_energy"]) for i in uphi]
+        low = next((i for i, u in zip(uphi, m_u) if u), uphi[0])
+        labels[low] = "roll_low"
+        rest = [i for i in uphi if i != low and candidates[i]["frequency_hz"] > candidates[low]["frequency_hz"]]
+        if rest:
+            f_model = model.frequency_hz("roll_high")
+            high = min(rest, key=lambda i: abs(math.log(candidates[i]["frequency_hz"] / f_model)))
+            labels[high] = "roll_high"
+    return labels
+
+
+# --------------------------------------------------------------------------- pipeline
+
+
+def _search_band(model, run, settings) -> tuple[float, float]:
+    f_lo = settings.f_min_hz or 0.35 * float(np.min(model.frequencies_hz))
+    f_hi = settings.f_max_hz or 1.3 * float(np.max(model.frequencies_hz))
+    return f_lo, min(f_hi, 0.4 * run.sample_rate_hz)
+
+
+def _hit_row(run_name: str, hit) -> dict:
+    return {"run": run_name, "hit": int(hit.index), "start_sample": int(hit.start_sample),
+            "peak_force_n": float(hit.peak_force_n), "accepted": bool(hit.accepted), "reason": hit.reason}
+
+
+def _coherence_at(frf, frequency_hz: float, weights) -> float:
+    i = int(np.argmin(np.abs(frf.frequency_hz - frequency_hz)))
+    w = np.abs(weights)
+    if not np.any(w):
+        return float(np.mean(frf.coherence[i]))
+    return float(np.sum(frf.coherence[i] * w) / np.sum(w))
+
+
+def _half_power_entry(frf, mode, tau_s) -> dict | None:
+    """Eq. (26)/(28) on the channel that shows the mode most, with the window correction."""
+    import warnings as _w
+
+    from guidefit import frf as frf_mod
+    from guidefit import modes as modes_mod
+
+    channel = int(np.argmax(np.abs(mode.residues)))
+    peak = int(np.argmin(np.abs(frf.frequency_hz - mode.peak_frequency_hz)))
+    try:
+        with _w.catch_warnings():
+            _w.simplefilter("ignore")
+            hp = modes_mod.half_power(frf.frequency_hz, frf.H[:, channel], peak)
+    except (IdentificationError, ValueError):
+        return None
+    zeta = hp.zeta
+    f_n = hp.f_peak_hz
+    if tau_s:
+        f_n, zeta = frf_mod.exponential_window_damping_correction(hp.zeta, hp.f_peak_hz, tau_s)
+    return {"f_peak_hz": hp.f_peak_hz, "f1_hz": hp.f1_hz, "f2_hz": hp.f2_hz, "zeta": hp.zeta,
+            "zeta_window_corrected": zeta, "channel": frf.channels[channel],
+            "bins_in_band": int(round((hp.f2_hz - hp.f1_hz) / (frf.frequency_hz[1] - frf.frequency_hz[0])))}
+
+
+def _jackknife(frf, modes, band) -> list[tuple[float | None, float | None]]:
+    """Delete-a-group jackknife std of (f_n, zeta) for each mode; None where too few groups."""
+    from guidefit import modes as modes_mod
+
+    subsets = list(frf.leave_one_group_out()) if hasattr(frf, "leave_one_group_out") else []
+    g = len(subsets)
+    if g < 3 or not modes:
+        return [(None, None)] * len(modes)
+    f_est = np.full((g, len(modes)), np.nan)
+    z_est = np.full((g, len(modes)), np.nan)
+    for j, sub in enumerate(subsets):
+        try:
+            refit = modes_mod.fit_modes(sub.frequency_hz, sub.H, band, len(modes), initial=modes, max_nfev=60)
+        except (IdentificationError, ValueError, np.linalg.LinAlgError):
+            continue
+        for k, m in enumerate(sorted(refit, key=lambda m: m.frequency_hz)):
+            f_est[j, k] = m.frequency_hz
+            z_est[j, k] = m.damping_ratio
+    out = []
+    for k in range(len(modes)):
+        ok = np.isfinite(f_est[:, k])
+        n = int(ok.sum())
+        if n < 3:
+            out.append((None, None))
+            continue
+        fk, zk = f_est[ok, k], z_est[ok, k]
+        out.append((math.sqrt((n - 1) / n * np.sum((fk - fk.mean()) ** 2)),
+                    math.sqrt((n - 1) / n * np.sum((zk - zk.mean()) ** 2))))
+    return out
+
+
+def _fit_run(run, frf, guide, model, settings, warnings: list) -> list[IdentifiedMode]:
+    from guidefit import frf as frf_mod
+    from guidefit import modes as modes_mod
+    from guidefit.model import vibration as vib
+
+    band = _search_band(model, run, settings)
+    try:
+        import warnings as _w
+
+        with _w.catch_warnings(record=True) as caught:
+            _w.simplefilter("always")
+            fitted = modes_mod.auto_fit(frf.frequency_hz, frf.H, band[0], band[1])
+        for w in caught:
+            if issubclass(w.category, modes_mod.ModeFitWarning):
+                warnings.append(f"run '{run.name}': {w.message}")
+    except IdentificationError as exc:
+        warnings.append(f"run '{run.name}': no mode found between {band[0]:.0f} and {band[1]:.0f} Hz ({exc})")
+        return []
+    fitted = sorted(fitted, key=lambda m: m.frequency_hz)
+    stds = _jackknife(frf, fitted, band) if settings.jackknife else [(None, None)] * len(fitted)
+    sensors = sensor_matrix(frf_channels(run, frf))
+    mass = vib.carriage_mass_matrix(vib.model_from_guide(guide))
+    tau = getattr(frf, "exp_window_tau_s", None)
+    candidates = []
+    for mode, (jk_f, jk_z) in zip(fitted, stds):
+        f_n, zeta = mode.frequency_hz, mode.damping_ratio
+        if tau:
+            f_n, zeta = frf_mod.exponential_window_damping_correction(zeta, f_n, tau)
+        shape = real_shape(mode.modal_constants)
+        q, _observed = rigid_body_motion(shape, sensors)
+        norm = np.linalg.norm(q) or 1.0
+        q = q / norm
+        energy = energy_shares(q, mass)
+        contrib = np.abs(q * (mass @ q))
+        f_std = _combine(jk_f, mode.frequency_std_hz)
+        z_std = _combine(jk_z, mode.damping_std)
+        candidates.append({
+            "mode": mode, "frequency_hz": f_n, "damping_ratio": zeta, "q": q, "energy": energy,
+            "u_energy": contrib[0], "phi_energy": contrib[4], "shape": shape,
+            "f_std": f_std, "z_std": z_std,
+        })
+    labels = label_modes(candidates, model)
+    out = []
+    names = [ch.name for ch in frf_channels(run, frf)]
+    for c, label in zip(candidates, labels):
+        mode = c["mode"]
+        model_f = model.frequency_hz(label) if label in model.labels else None
+        out.append(IdentifiedMode(
+            label=label, run=run.name, frequency_hz=float(c["frequency_hz"]),
+            damping_ratio=float(c["damping_ratio"]),
+            frequency_std_hz=c["f_std"], damping_std=c["z_std"], model_frequency_hz=model_f,
+            shape=dict(zip(names, (float(v) for v in c["shape"]))),
+            motion=tuple(float(v) for v in c["q"]), energy={k: float(v) for k, v in c["energy"].items()},
+            coherence=_coherence_at(frf, mode.peak_frequency_hz, mode.residues),
+            half_power=_half_power_entry(frf, mode, tau), raw_damping_ratio=float(mode.damping_ratio),
+        ))
+    return out
+
+
+def _combine(a: float | None, b: float | None) -> float | None:
+    """Root-sum-square of two standard deviations, ignoring missing ones."""
+    vals = [float(v) for v in (a, b) if v is not None and math.isfinite(v)]
+    return math.sqrt(sum(v * v for v in vals)) if vals else None
+
+
+def frf_channels(run, frf) -> list:
+    """The run's Channel objects in the FRF's response order."""
+    by_name = {ch.name: ch for ch in run.channels}
+    return [by_name[name] for name in frf.channels]
+
+
+def _select(all_modes: list[IdentifiedMode], model, warnings: list):
+    """One estimate per label (smallest relative frequency std); the others are extra or duplicates."""
+    chosen: dict[str, IdentifiedMode] = {}
+    extras: list[IdentifiedMode] = []
+
+    def quality(m):
+        return (m.frequency_std_hz or 0.01 * m.frequency_hz) / m.frequency_hz
+
+    for m in all_modes:
+        if m.label == "extra":
+            extras.append(m)
+            continue
+        if m.label not in chosen or quality(m) < quality(chosen[m.label]):
+            chosen[m.label] = m
+    # the same physical mode seen in several runs is not an extra mode
+    known = [m.frequency_hz for m in chosen.values()]
+    unique_extras: list[IdentifiedMode] = []
+    for m in sorted(extras, key=quality):
+        near = [f for f in known + [e.frequency_hz for e in unique_extras] if abs(f / m.frequency_hz - 1) < 0.01]
+        if not near:
+            unique_extras.append(m)
+    for m in unique_extras:
+        warnings.append(f"run '{m.run}': a mode at {m.frequency_hz:.1f} Hz that the model does not predict "
+                        f"(shape not matching any carriage mode)")
+    missing = [lab for lab in model.labels if lab not in chosen and not lab.startswith("support")]
+    for lab in missing:
+        warnings.append(f"model mode '{lab}' ({model.frequency_hz(lab):.0f} Hz) not observed in any run")
+    modes = sorted(chosen.values(), key=lambda m: m.frequency_hz)
+    return modes, sorted(unique_extras, key=lambda m: m.frequency_hz), missing
+
+
+def _quality_warnings(modes, settings, warnings: list) -> None:
+    for m in modes:
+        if m.label not in JOINT_LABELS.values():
+            continue
+        if m.coherence < settings.min_coherence:
+            warnings.append(f"mode {m.label} at {m.frequency_hz:.1f} Hz: coherence {m.coherence:.3f} at the peak "
+                            f"is below {settings.min_coherence}")
+        hp = m.half_power
+        if hp is None:
+            warnings.append(f"mode {m.label}: half-power points not found inside the band")
+        elif hp["bins_in_band"] < 3:
+            warnings.append(f"mode {m.label}: half-power band spans only {hp['bins_in_band']} bins; "
+                            f"the curve-fit damping is the one to trust")
+
+
+def identify(path, guide=None, settings: IdentifySettings | None = None) -> Identification:
+    """Identify the joint modes and K_V, K_H, c_V, c_H of one recording.
+
+    Parameters
+    ----------
+    path : str or Path
+        HDF5 or CSV recording in the contract format.
+    guide : str, Path or Guide, optional
+        Overrides the file's ``guide`` attribute (default MRB35 when neither is given).
+    settings : IdentifySettings, optional
+
+    Raises
+    ------
+    RecordingError
+        Malformed file (exit 2).
+    IdentificationError
+        Valid file, but no result can be trusted: every hit rejected, no joint mode found (exit 1).
+    """
+    from guidefit.frf import compute_frf
+    from guidefit.hits import HitSettings, iter_hits
+    from guidefit.model import vibration as vib
+    from guidefit.model.guides import Guide, load_guide
+    from guidefit.recording import read_recording
+
+    settings = settings or IdentifySettings()
+    recording = read_recording(path)
+    if not isinstance(guide, Guide):
+        guide = load_guide(guide or recording.guide or "MRB35")
+    model = vib.solve_modes(vib.model_from_guide(guide))
+    warnings: list[str] = []
+    runs = []
+    all_modes: list[IdentifiedMode] = []
+    for run in recording.runs:
+        rows: list[dict] = []
+
+        def tapped(it, rows=rows, run=run):
+            for hit in it:
+                rows.append(_hit_row(run.name, hit))
+                if not hit.accepted:
+                    warnings.append(f"run '{run.name}' hit {hit.index}: rejected: {hit.reason}")
+                yield hit
+
+        hits = tapped(iter_hits(run, settings.hits or HitSettings()))
+        try:
+            frf = compute_frf(run, hits, estimator=settings.estimator, window=settings.window)
+        except IdentificationError as exc:
+            warnings.append(f"run '{run.name}': {exc}")
+            continue
+        n_ok = sum(r["accepted"] for r in rows)
+        if n_ok < settings.min_accepted_hits:
+            warnings.append(f"run '{run.name}': only {n_ok} accepted hit(s); uncertainties are unreliable")
+        modes = _fit_run(run, frf, guide, model, settings, warnings)
+        all_modes.extend(modes)
+        runs.append(RunResult(run.name, frf, rows, modes, tuple(run.excitation_direction),
+                              frf_channels(run, frf)))
+    if not runs:
+        raise IdentificationError(f"{path}: no run gave an FRF ({'; '.join(warnings) or 'no hits'})")
+    modes, extras, missing = _select(all_modes, model, warnings)
+    joint = {k: next((m for m in modes if m.label == lab), None) for k, lab in JOINT_LABELS.items()}
+    if joint["V"] is None and joint["H"] is None:
+        raise IdentificationError(f"{path}: neither the vertical nor the horizontal joint mode was found")
+    _quality_warnings(modes, settings, warnings)
+    params = joint_parameters(guide.mass_kg, joint)
+    return Identification(str(path), guide, tuple(runs), tuple(modes), params, tuple(warnings),
+                          tuple(extras), tuple(missing))
+
