@@ -97,5 +97,66 @@ def predict(guide_name, load_text, sweep, calibration, as_json, plot_path):
     report.render_prediction(result, as_json=as_json, plot_path=plot_path)
 
 
+def _identify_one(path, guide, settings):
+    """Worker for one file: (exit code, Identification or None, error text)."""
+    from guidefit.errors import GuidefitError
+    from guidefit.identify import identify
+
+    try:
+        return 0, identify(path, guide=guide, settings=settings), None
+    except GuidefitError as exc:
+        return exc.exit_code, None, str(exc)
+
+
+@main.command(name="identify")
+@click.argument("files", nargs=-1, required=True, type=click.Path(dir_okay=False))
+@click.option("--guide", "guide_name", help="Guide name or TOML (default: the file's guide attribute, else MRB35).")
+@click.option("--estimator", type=click.Choice(["H1", "H2", "Hv"]), default="H1", show_default=True)
+@click.option("--json", "as_json", is_flag=True, help="One JSON object per file (JSON Lines) on stdout.")
+@click.option("--csv", "csv_path", type=click.Path(dir_okay=False), help="Write one row per file to this CSV.")
+@click.option("--summary", "summary_path", type=click.Path(dir_okay=False), help="Alias of --csv.")
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False),
+              help="PNG of FRFs, phase and coherence (several files: FILE stem is appended).")
+@click.option("--no-jackknife", is_flag=True, help="Skip the hit-group jackknife (faster, fit std only).")
+def identify_cmd(files, guide_name, estimator, as_json, csv_path, summary_path, plot_path, no_jackknife):
+    """Identify K_V, K_H, c_V, c_H from hammer recordings (Eq. 24-29)."""
+    from pathlib import Path
+
+    from guidefit import report
+    from guidefit.identify import IdentifySettings
+
+    settings = IdentifySettings(estimator=estimator, jackknife=not no_jackknife)
+    worst = 0
+    rows = []
+    console = report._console(stderr=as_json)
+    progress = report.file_progress(len(files), console) if len(files) > 1 else None
+    for path in files:
+        code, result, error = _identify_one(path, guide_name, settings)
+        worst = max(worst, code)
+        if progress:
+            progress.advance()
+        if result is None:
+            click.echo(f"guidefit: error: {error}", err=True)
+            if as_json:
+                click.echo(report.dump_json({"file": str(path), "error": error, "exit_code": code,
+                                             "parameters": {}, "modes": [], "warnings": [error]}))
+            rows.append({"file": str(path), "error": error})
+            continue
+        rows.append(result.summary_row())
+        if as_json:
+            click.echo(report.dump_json(result.to_dict()))
+        else:
+            report.render_identification(result, console)
+        if plot_path:
+            target = plot_path if len(files) == 1 else str(Path(plot_path).with_stem(
+                f"{Path(plot_path).stem}_{Path(path).stem}"))
+            report.plot_identification(result, target)
+    if progress:
+        progress.close()
+    for target in filter(None, {csv_path, summary_path}):
+        report.write_summary_csv(rows, target)
+    sys.exit(worst)
+
+
 if __name__ == "__main__":  # pragma: no cover
     main()

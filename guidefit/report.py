@@ -166,3 +166,114 @@ def plot_sweep(frame, path: str) -> None:
     axes[0, 1].legend()
     fig.tight_layout()
     fig.savefig(path, dpi=110)
+
+
+# --------------------------------------------------------------------------- identify
+
+_PARAM_ORDER = ("f_V", "zeta_V", "K_V", "c_V", "f_H", "zeta_H", "K_H", "c_H")
+
+
+def _pm(value, std, unit="") -> str:
+    if value is None:
+        return "-"
+    if std is None:
+        return fmt(value, unit)
+    return f"{fmt(value)} ± {fmt(std)} {unit}".strip()
+
+
+def render_identification(result, console=None) -> None:
+    """Rich tables of one identification: parameters, modes, rejected hits, warnings."""
+    from rich.table import Table
+
+    console = console or _console()
+    table = Table(title=f"{result.file}  (guide {result.guide.name}, M = {result.guide.mass_kg:g} kg)")
+    table.add_column("parameter")
+    table.add_column("value ± 1 std", justify="right")
+    table.add_column("equation")
+    eqs = {"f_V": "|p|/2pi, curve fit", "f_H": "|p|/2pi, curve fit", "K_V": "Eq. (24)", "K_H": "Eq. (25)",
+           "zeta_V": "curve fit (Eq. 26 beside)", "zeta_H": "curve fit (Eq. 28 beside)",
+           "c_V": "Eq. (27)", "c_H": "Eq. (29)"}
+    for name in _PARAM_ORDER:
+        p = result.parameters[name]
+        table.add_row(name, _pm(p["value"], p["std"], p["unit"]), eqs[name])
+    console.print(table)
+    modes = Table(title="modes")
+    for col in ("label", "run", "f_n (Hz)", "zeta", "model (Hz)", "coherence", "half-power zeta"):
+        modes.add_column(col, justify="right" if col != "label" else "left")
+    for m in list(result.modes) + list(result.extra_modes):
+        hp = m.half_power
+        modes.add_row(
+            m.label, m.run, _pm(m.frequency_hz, m.frequency_std_hz), _pm(m.damping_ratio, m.damping_std),
+            fmt(m.model_frequency_hz), f"{m.coherence:.3f}",
+            "-" if hp is None else f"{hp['zeta_window_corrected']:.4f} ({hp['bins_in_band']} bins)",
+        )
+    console.print(modes)
+    rejected = [h for run in result.runs for h in run.hits if not h["accepted"]]
+    n_hits = sum(len(run.hits) for run in result.runs)
+    console.print(f"hits: {n_hits - len(rejected)} accepted, {len(rejected)} rejected")
+    if rejected:
+        hits = Table(title="rejected hits")
+        for col in ("run", "hit", "peak force (N)", "reason"):
+            hits.add_column(col)
+        for h in rejected:
+            hits.add_row(h["run"], str(h["hit"]), fmt(h["peak_force_n"]), h["reason"] or "")
+        console.print(hits)
+    for w in result.warnings:
+        console.print(f"[yellow]warning:[/yellow] {w}")
+
+
+def write_summary_csv(rows: list[dict], path: str) -> None:
+    """One row per file (pandas-readable; units in the column names)."""
+    import pandas as pd
+
+    pd.DataFrame(rows).to_csv(path, index=False)
+
+
+def plot_identification(result, path: str) -> None:
+    """FRF magnitude, phase and coherence per run with picked modes and half-power bands."""
+    import numpy as np
+
+    n_runs = len(result.runs)
+    fig, axes = _figure(3, n_runs, (6.5 * n_runs, 9))
+    for j, run in enumerate(result.runs):
+        frf = run.frf
+        f = frf.frequency_hz
+        band = f <= min(f[-1], 1.4 * max(m.frequency_hz for m in result.modes) if result.modes else f[-1])
+        for k, name in enumerate(frf.channels):
+            axes[0, j].semilogy(f[band], np.abs(frf.H[band, k]), lw=0.8, label=name)
+            axes[1, j].plot(f[band], np.degrees(np.angle(frf.H[band, k])), lw=0.6)
+            axes[2, j].plot(f[band], frf.coherence[band, k], lw=0.6)
+        for m in list(run.modes):
+            for ax in axes[:, j]:
+                ax.axvline(m.frequency_hz, color="k", ls="--", lw=0.6)
+            axes[0, j].annotate(m.label, (m.frequency_hz, 1), xycoords=("data", "axes fraction"),
+                                rotation=90, va="top", fontsize=7)
+            if m.half_power:
+                axes[0, j].axvspan(m.half_power["f1_hz"], m.half_power["f2_hz"], color="C1", alpha=0.15)
+        axes[0, j].set_title(f"run '{run.name}' ({frf.estimator}, {frf.n_averages} hits)")
+        axes[0, j].set_ylabel("|H| ((m/s^2)/N)")
+        axes[1, j].set_ylabel("phase (deg)")
+        axes[2, j].set_ylabel("coherence")
+        axes[2, j].set_ylim(0, 1.05)
+        axes[2, j].set_xlabel("frequency (Hz)")
+        axes[0, j].legend(fontsize=6, ncol=2)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
+class file_progress:  # noqa: N801 - used like a function
+    """A rich progress bar over files on the given console (stderr when stdout carries JSON)."""
+
+    def __init__(self, total: int, console=None):
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+        self._progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+                                  TimeRemainingColumn(), console=console or _console(stderr=True), transient=True)
+        self._task = self._progress.add_task("files", total=total)
+        self._progress.start()
+
+    def advance(self, n: int = 1) -> None:
+        self._progress.advance(self._task, n)
+
+    def close(self) -> None:
+        self._progress.stop()
