@@ -158,5 +158,25 @@ def identify_cmd(files, guide_name, estimator, as_json, csv_path, summary_path, 
     sys.exit(worst)
 
 
+@main.command(name="export")
+@click.argument("results", type=click.Path(dir_okay=False))
+@click.option("--format", "fmt", type=click.Choice(["nastran", "ansys", "abaqus", "json"]), default="json",
+              show_default=True)
+@click.option("--vertical", "n_vertical", default=4, show_default=True, help="Vertical elements per carriage.")
+@click.option("--horizontal", "n_horizontal", default=8, show_default=True,
+              help="Horizontal elements per carriage.")
+@click.option("-o", "--out", "out_path", type=click.Path(dir_okay=False), help="Write here instead of stdout.")
+def export_cmd(results, fmt, n_vertical, n_horizontal, out_path):
+    """Spring-damper elements of identified joints for a machine FEM model (paper Fig. 10)."""
+    from guidefit.export import export
+
+    text = export(results, fmt, n_vertical=n_vertical, n_horizontal=n_horizontal)
+    if out_path:
+        with open(out_path, "w", encoding="utf-8") as handle:
+            handle.write(text)
+    else:
+        click.echo(text, nl=False)
+
+
 if __name__ == "__main__":  # pragma: no cover
     main()
