@@ -114,48 +114,98 @@ def _identify_one(path, guide, settings):
 @click.option("--estimator", type=click.Choice(["H1", "H2", "Hv"]), default="H1", show_default=True)
 @click.option("--json", "as_json", is_flag=True, help="One JSON object per file (JSON Lines) on stdout.")
 @click.option("--csv", "csv_path", type=click.Path(dir_okay=False), help="Write one row per file to this CSV.")
-@click.option("--summary", "summary_path", type=click.Path(dir_okay=False), help="Alias of --csv.")
+@click.option("--summary", "summary_path", type=click.Path(dir_okay=False), help="Same as --csv.")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False),
-              help="PNG of FRFs, phase and coherence (several files: FILE stem is appended).")
+              help="PNG of FRFs, phase and coherence (several files: the file's stem is appended).")
+@click.option("--check", "check_path", type=click.Path(dir_okay=False),
+              help="Tolerance spec (TOML); exit 1 when a file is out of tolerance.")
+@click.option("--junit", "junit_path", type=click.Path(dir_okay=False), help="Write the outcome as JUnit XML.")
+@click.option("--jobs", default=1, show_default=True, type=click.IntRange(1, 64),
+              help="Files processed in parallel.")
 @click.option("--no-jackknife", is_flag=True, help="Skip the hit-group jackknife (faster, fit std only).")
-def identify_cmd(files, guide_name, estimator, as_json, csv_path, summary_path, plot_path, no_jackknife):
+def identify_cmd(files, guide_name, estimator, as_json, csv_path, summary_path, plot_path, check_path,
+                 junit_path, jobs, no_jackknife):
     """Identify K_V, K_H, c_V, c_H from hammer recordings (Eq. 24-29)."""
+    import time
     from pathlib import Path
 
     from guidefit import report
     from guidefit.identify import IdentifySettings
 
+    spec = None
+    if check_path:
+        from guidefit.check import load_spec
+
+        spec = load_spec(check_path)
     settings = IdentifySettings(estimator=estimator, jackknife=not no_jackknife)
-    worst = 0
-    rows = []
+    started = time.perf_counter()
+    worst, rows, outcomes = 0, [], []
     console = report._console(stderr=as_json)
-    progress = report.file_progress(len(files), console) if len(files) > 1 else None
-    for path in files:
-        code, result, error = _identify_one(path, guide_name, settings)
-        worst = max(worst, code)
-        if progress:
-            progress.advance()
+    for path, (code, result, error) in _map_files(files, guide_name, settings, jobs, console):
+        violations = []
         if result is None:
             click.echo(f"guidefit: error: {error}", err=True)
-            if as_json:
-                click.echo(report.dump_json({"file": str(path), "error": error, "exit_code": code,
-                                             "parameters": {}, "modes": [], "warnings": [error]}))
+            data = {"file": str(path), "error": error, "exit_code": code, "parameters": {}, "modes": [],
+                    "warnings": [error]}
             rows.append({"file": str(path), "error": error})
-            continue
-        rows.append(result.summary_row())
-        if as_json:
-            click.echo(report.dump_json(result.to_dict()))
         else:
-            report.render_identification(result, console)
-        if plot_path:
-            target = plot_path if len(files) == 1 else str(Path(plot_path).with_stem(
-                f"{Path(plot_path).stem}_{Path(path).stem}"))
-            report.plot_identification(result, target)
-    if progress:
-        progress.close()
+            data = result.to_dict()
+            rows.append(result.summary_row())
+            if plot_path:
+                target = plot_path if len(files) == 1 else str(
+                    Path(plot_path).with_stem(f"{Path(plot_path).stem}_{Path(path).stem}"))
+                report.plot_identification(result, target)
+            if not as_json:
+                report.render_identification(result, console)
+        if spec is not None and result is not None:
+            from guidefit.check import check_result
+
+            violations = check_result(data, spec)
+            for line in violations:
+                click.echo(f"guidefit: check failed: {line}", err=True)
+            if violations:
+                code = max(code, 1)
+            data["check"] = {"passed": not violations, "violations": violations}
+        if as_json:
+            click.echo(report.dump_json(data))
+        worst = max(worst, code)
+        outcomes.append((str(path), violations, error))
     for target in filter(None, {csv_path, summary_path}):
         report.write_summary_csv(rows, target)
+    if junit_path:
+        from guidefit.check import junit_xml
+
+        junit_xml(outcomes, junit_path, time.perf_counter() - started)
+    if len(files) > 1 and not as_json:
+        report.render_batch_summary(rows, outcomes, console)
     sys.exit(worst)
+
+
+def _map_files(files, guide_name, settings, jobs, console):
+    """Yield (path, (code, result, error)) in input order, in parallel when jobs > 1, with a progress bar."""
+    from guidefit import report
+
+    progress = report.file_progress(len(files), console) if len(files) > 1 else None
+    try:
+        if jobs == 1 or len(files) == 1:
+            for path in files:
+                outcome = _identify_one(path, guide_name, settings)
+                if progress:
+                    progress.advance()
+                yield path, outcome
+            return
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(max_workers=jobs) as pool:
+            futures = [pool.submit(_identify_one, path, guide_name, settings) for path in files]
+            for path, future in zip(files, futures):
+                outcome = future.result()
+                if progress:
+                    progress.advance()
+                yield path, outcome
+    finally:
+        if progress:
+            progress.close()
 
 
 @main.command(name="export")

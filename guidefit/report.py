@@ -277,3 +277,18 @@ class file_progress:  # noqa: N801 - used like a function
 
     def close(self) -> None:
         self._progress.stop()
+
+
+def render_batch_summary(rows: list[dict], outcomes: list, console=None) -> None:
+    """One line per file: K_V, K_H, c_V, c_H and the check outcome."""
+    from rich.table import Table
+
+    console = console or _console()
+    table = Table(title=f"batch summary ({len(rows)} files)")
+    for col in ("file", "K_V (N/m)", "K_H (N/m)", "c_V (N s/m)", "c_H (N s/m)", "outcome"):
+        table.add_column(col)
+    for row, (_, violations, error) in zip(rows, outcomes):
+        outcome = "error" if error else ("out of tolerance" if violations else "ok")
+        table.add_row(row["file"], fmt(row.get("K_V_n_per_m")), fmt(row.get("K_H_n_per_m")),
+                      fmt(row.get("c_V_ns_per_m")), fmt(row.get("c_H_ns_per_m")), outcome)
+    console.print(table)

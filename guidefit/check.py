@@ -1,0 +1,144 @@
+"""Tolerance checks of identify results for production lines and CI (``identify --check``).
+
+A check spec is a TOML file::
+
+    [parameters]                      # bands for any reported parameter (SI)
+    K_V = { min = 0.9e9, max = 1.2e9 }
+    f_H = { min = 900.0 }
+    zeta_V = { max = 0.05 }
+
+    [quality]
+    min_coherence = 0.95              # coherence at the peak of the vertical and horizontal modes
+    max_rejected_hits = 2             # per file
+    max_relative_std = 0.02           # std / value of every checked parameter
+    allow_warnings = true             # false: any warning is a violation
+
+A parameter that was not identified (``null``) violates any band on it.
+:func:`junit_xml` writes the outcome per file as JUnit XML for CI systems.
+
+Examples
+--------
+>>> spec = parse_spec({"parameters": {"K_V": {"min": 0.9e9, "max": 1.2e9}}}, "spec")
+>>> check_result({"file": "a.h5", "parameters": {"K_V": {"value": 1.3e9, "std": 1e6}}}, spec)
+['a.h5: K_V = 1.3e+09 above max 1.2e+09']
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from guidefit.errors import GuideError
+
+_QUALITY = {"min_coherence": float, "max_rejected_hits": int, "max_relative_std": float, "allow_warnings": bool}
+_JOINT = ("vertical", "roll_low")
+
+
+class CheckSpecError(GuideError):
+    """The check spec file is invalid (exit 2)."""
+
+
+@dataclass(frozen=True)
+class CheckSpec:
+    """Parameter bands and quality limits."""
+
+    bands: dict = field(default_factory=dict)  # name -> (min or None, max or None)
+    quality: dict = field(default_factory=dict)
+
+
+def load_spec(path) -> CheckSpec:
+    """Read a check spec TOML file; one-line :class:`CheckSpecError` on any problem."""
+    import tomllib
+
+    try:
+        with open(path, "rb") as handle:
+            data = tomllib.load(handle)
+    except OSError as exc:
+        raise CheckSpecError(f"{path}: cannot read check spec ({exc.strerror})") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise CheckSpecError(f"{path}: not valid TOML ({exc})") from None
+    return parse_spec(data, str(path))
+
+
+def parse_spec(data: dict, where: str) -> CheckSpec:
+    """Validate a check spec given as a dict (the parsed TOML)."""
+    unknown = set(data) - {"parameters", "quality"}
+    if unknown:
+        raise CheckSpecError(f"{where}: unknown section '{sorted(unknown)[0]}'; allowed: parameters, quality")
+    bands = {}
+    for name, band in data.get("parameters", {}).items():
+        if not isinstance(band, dict) or not band or set(band) - {"min", "max"}:
+            raise CheckSpecError(f"{where}: parameters.{name} must be a table with 'min' and/or 'max'")
+        lo, hi = band.get("min"), band.get("max")
+        for key, value in (("min", lo), ("max", hi)):
+            if value is not None and (isinstance(value, bool) or not isinstance(value, int | float)):
+                raise CheckSpecError(f"{where}: parameters.{name}.{key} must be a number, got {value!r}")
+        if lo is not None and hi is not None and lo > hi:
+            raise CheckSpecError(f"{where}: parameters.{name}: min {lo} is above max {hi}")
+        bands[name] = (lo, hi)
+    quality = {}
+    for name, value in data.get("quality", {}).items():
+        if name not in _QUALITY:
+            raise CheckSpecError(f"{where}: unknown field 'quality.{name}'; allowed: {', '.join(_QUALITY)}")
+        kind = _QUALITY[name]
+        ok = isinstance(value, bool) if kind is bool else (isinstance(value, int | float)
+                                                           and not isinstance(value, bool))
+        if not ok:
+            raise CheckSpecError(f"{where}: quality.{name} must be {kind.__name__}, got {value!r}")
+        quality[name] = value
+    return CheckSpec(bands, quality)
+
+
+def check_result(result: dict, spec: CheckSpec) -> list[str]:
+    """Violations of one identify result (the ``to_dict()``/JSON form); empty when it passes."""
+    where = result.get("file", "?")
+    if "error" in result:
+        return [f"{where}: {result['error']}"]
+    out = []
+    params = result.get("parameters", {})
+    for name, (lo, hi) in spec.bands.items():
+        p = params.get(name)
+        value = None if p is None else p.get("value")
+        if value is None:
+            out.append(f"{where}: {name} not identified (band {lo} .. {hi})")
+            continue
+        if lo is not None and value < lo:
+            out.append(f"{where}: {name} = {value:.4g} below min {lo:.4g}")
+        if hi is not None and value > hi:
+            out.append(f"{where}: {name} = {value:.4g} above max {hi:.4g}")
+        limit = spec.quality.get("max_relative_std")
+        std = p.get("std")
+        if limit is not None and std is not None and value and abs(std / value) > limit:
+            out.append(f"{where}: {name} relative std {abs(std / value):.3g} above {limit:.3g}")
+    q = spec.quality
+    if "min_coherence" in q:
+        for mode in result.get("modes", []):
+            coh = mode.get("coherence")
+            if mode.get("label") in _JOINT and coh is not None and coh < q["min_coherence"]:
+                out.append(f"{where}: coherence {coh:.3f} at the {mode['label']} peak below {q['min_coherence']}")
+    if "max_rejected_hits" in q:
+        rejected = sum(1 for h in result.get("hits", []) if not h.get("accepted", True))
+        if rejected > q["max_rejected_hits"]:
+            out.append(f"{where}: {rejected} rejected hits, more than {q['max_rejected_hits']}")
+    if q.get("allow_warnings") is False:
+        out += [f"{where}: warning: {w}" for w in result.get("warnings", [])]
+    return out
+
+
+def junit_xml(outcomes: list[tuple[str, list[str], str | None]], path, elapsed_s: float = 0.0) -> None:
+    """JUnit XML: one testcase per file; ``outcomes`` = (file, violations, error or None)."""
+    import xml.etree.ElementTree as ET
+
+    failures = sum(1 for _, v, e in outcomes if v and e is None)
+    errors = sum(1 for _, _, e in outcomes if e is not None)
+    suite = ET.Element("testsuite", name="guidefit", tests=str(len(outcomes)), failures=str(failures),
+                       errors=str(errors), time=f"{elapsed_s:.3f}")
+    for file, violations, error in outcomes:
+        case = ET.SubElement(suite, "testcase", classname="guidefit.identify", name=str(file))
+        if error is not None:
+            ET.SubElement(case, "error", message=error).text = error
+        elif violations:
+            ET.SubElement(case, "failure", message=violations[0]).text = "\n".join(violations)
+    root = ET.Element("testsuites", tests=str(len(outcomes)), failures=str(failures), errors=str(errors))
+    root.append(suite)
+    ET.indent(root)
+    ET.ElementTree(root).write(path, encoding="utf-8", xml_declaration=True)
