@@ -545,3 +545,8 @@ def identify(path, guide=None, settings: IdentifySettings | None = None) -> Iden
     return Identification(str(path), guide, tuple(runs), tuple(modes), params, tuple(warnings),
                           tuple(extras), tuple(missing))
 
+
+
+from guidefit._api import make_callable  # noqa: E402
+
+make_callable(__name__, "identify")

@@ -82,3 +82,8 @@ def predict_sweep(guide, calibration: str = "nominal", direction_load=None, n: i
     from guidefit.model import static
 
     return static.sweep(guide, direction_load=direction_load, n=n, calibration=calibration)
+
+
+from guidefit._api import make_callable  # noqa: E402
+
+make_callable(__name__, "predict")
