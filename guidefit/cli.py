@@ -228,5 +228,18 @@ def export_cmd(results, fmt, n_vertical, n_horizontal, out_path):
         click.echo(text, nl=False)
 
 
+@main.command(name="report")
+@click.argument("recording", type=click.Path(dir_okay=False))
+@click.option("-o", "--out", "out_path", required=True, type=click.Path(dir_okay=False),
+              help="HTML file to write (self-contained, plots embedded).")
+@click.option("--guide", "guide_name", help="Guide name or TOML (default: the file's guide attribute).")
+def report_cmd(recording, out_path, guide_name):
+    """One self-contained HTML report: FRFs, coherence, modes, parameters, hits, explanation."""
+    from guidefit.html_report import write_report
+
+    write_report(recording, out_path, guide=guide_name)
+    click.echo(f"report written to {out_path}")
+
+
 if __name__ == "__main__":  # pragma: no cover
     main()
