@@ -33,6 +33,18 @@ class _Group(click.Group):
         except KeyboardInterrupt:
             click.echo("guidefit: interrupted", err=True)
             sys.exit(130)
+        except (click.exceptions.Exit, click.ClickException, SystemExit):
+            raise
+        except Exception as exc:  # a bug of guidefit: still one line, never a traceback
+            where = ""
+            tb = exc.__traceback__
+            while tb is not None and tb.tb_next is not None:
+                tb = tb.tb_next
+            if tb is not None:
+                where = f" at {tb.tb_frame.f_code.co_filename.rsplit('/', 1)[-1]}:{tb.tb_lineno}"
+            click.echo(f"guidefit: internal error: {type(exc).__name__}: {exc}{where} "
+                       "(please report this with the input file)", err=True)
+            sys.exit(1)
 
 
 @click.group(cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})
@@ -106,6 +118,8 @@ def _identify_one(path, guide, settings):
         return 0, identify(path, guide=guide, settings=settings), None
     except GuidefitError as exc:
         return exc.exit_code, None, str(exc)
+    except Exception as exc:  # noqa: BLE001 - a batch goes on; the file is reported
+        return 1, None, f"{path}: internal error: {type(exc).__name__}: {exc} (please report this file)"
 
 
 @main.command(name="identify")
@@ -239,6 +253,40 @@ def report_cmd(recording, out_path, guide_name):
 
     write_report(recording, out_path, guide=guide_name)
     click.echo(f"report written to {out_path}")
+
+
+@main.command(name="simulate")
+@click.option("--guide", "guide_name", default="MRB35", show_default=True,
+              help="Built-in guide name or path to a guide TOML file.")
+@click.option("--out", "out_path", required=True, type=click.Path(dir_okay=False),
+              help="Recording to write (.h5 or .csv); its truth goes to FILE.truth.json.")
+@click.option("--effect", "effects", multiple=True, metavar="NAME:param=value,...",
+              help="An effect the simulated carriage has (repeatable), e.g. added_mass:mass_kg=0.1.")
+@click.option("--fault", "faults", multiple=True, metavar="NAME[:param=value,...]",
+              help="A measurement fault (repeatable): double_hit, overload, loose_sensor, dropped_hit.")
+@click.option("--hits", default=8, show_default=True, type=click.IntRange(1, 100_000), help="Hits per run.")
+@click.option("--seed", default=0, show_default=True, type=int, help="Random seed (same seed, same file).")
+@click.option("--format", "file_format", type=click.Choice(["h5", "csv"]),
+              help="File format [default: from the --out suffix]; CSV writes one file per run.")
+@click.option("--runs", default="vertical,lateral", show_default=True, help="Runs to simulate, comma-separated.")
+@click.option("--record-length", "record_s", default=0.1, show_default=True, type=float,
+              help="Record length per hit, s.")
+@click.option("--force", "force_n", default="200,500", show_default=True, metavar="MIN,MAX",
+              help="Range of the hits' peak forces, N.")
+@click.option("--layout", type=click.Choice(["hits", "signals"]), default="hits", show_default=True,
+              help="One pre-triggered record per hit, or one continuous record.")
+@click.option("--ideal", is_flag=True, help="No sensor noise, no quantisation, no clipping.")
+def simulate_cmd(guide_name, out_path, effects, faults, hits, seed, file_format, runs, record_s, force_n,
+                 layout, ideal):
+    """Simulate a hammer test with known truth, written in the recording contract."""
+    from guidefit.simulate import config_from_options, write_simulation
+
+    config = config_from_options(runs=runs, hits=hits, record_s=record_s, force_n=force_n, layout=layout,
+                                 faults=faults, ideal=ideal)
+    out = write_simulation(out_path, guide_name, effects, config, seed, file_format=file_format, progress=True)
+    for path in out.recordings:
+        click.echo(f"wrote {path}")
+    click.echo(f"truth in {out.truth_path} (never read by identify)")
 
 
 if __name__ == "__main__":  # pragma: no cover
