@@ -109,10 +109,10 @@ def test_vertical_frf_peaks_at_model_frequency_with_set_damping():
     f_model = truth["parameters"]["f_V"]["value"]
     f_peak = refined_peak(freq, y, 3000, 4000)
     assert abs(f_peak / f_model - 1) < 1e-3
-    assert abs(f_peak / f_model - 1) < 1e-5  # measured: 1e-7
+    assert abs(f_peak / f_model - 1) < 1e-5  # measured: 4e-8
     zeta = half_power_damping(freq, y, f_peak)
     assert zeta == pytest.approx(0.029, rel=0.05)
-    assert zeta == pytest.approx(0.029, rel=0.005)  # measured: 0.02 %
+    assert zeta == pytest.approx(0.029, rel=1e-4)  # measured: 2e-6
 
 
 def test_lateral_frf_roll_low_peaks_at_model_frequency_with_set_damping():
@@ -286,7 +286,7 @@ def test_nonlinear_agrees_with_linear_at_small_force():
     lin, _ = simulate(MRB35, [], cfg, seed=9)
     non, truth = simulate(MRB35, ["amplitude_dependence:preload_factor=1"], cfg, seed=9)
     a, b = lin.runs[0].data, non.runs[0].data
-    assert np.abs(a - b).max() / np.abs(a).max() < 2e-3
+    assert np.abs(a - b).max() / np.abs(a).max() < 1e-4  # measured: 1.2e-5
     assert truth["parameters"]["f_V"]["value"] == pytest.approx(3529.0, abs=0.1)
 
 
@@ -298,8 +298,8 @@ def test_harder_hits_lower_the_vertical_frequency():
         run = data.runs[0]
         freq, h = frf(run, sum(column(run, f"acc_{p}_y") for p in "ABCD"))
         found.append(refined_peak(freq, mobility(freq, h), 2000, 4500))
-    assert found[0] == pytest.approx(3529.0, rel=2e-3)
-    assert found[0] > found[1] > found[2]
+    assert found[0] == pytest.approx(3529.0, rel=2e-4)
+    assert found[0] > found[1] > found[2]  # measured: 3529.0, 3523.3, 3319.5 Hz
 
 
 # --------------------------------------------------------------------------- effects
@@ -456,3 +456,22 @@ def test_readme_commands_match_the_files():
         out = re.search(r"--out (\S+)", command).group(1)
         assert (SAMPLE_DATA.parent / out).is_file(), out
         assert (SAMPLE_DATA.parent / truth_path(out)).is_file(), out
+
+
+def test_cli_simulate_writes_files_and_reports_bad_input_in_one_line(tmp_path):
+    from click.testing import CliRunner
+
+    from guidefit.cli import main
+
+    out = tmp_path / "t.h5"
+    result = CliRunner().invoke(main, ["simulate", "--out", str(out), "--hits", "1", "--record-length", "0.005",
+                                       "--effect", "contact_stiffness:factor=0.9", "--fault", "double_hit"])
+    assert result.exit_code == 0, result.output
+    assert out.is_file() and truth_path(out).is_file()
+    truth = json.loads(truth_path(out).read_text())
+    assert truth["effects"][0]["name"] == "contact_stiffness" and truth["faults"][0]["name"] == "double_hit"
+    for bad in (["--effect", "contact_stiffness:factor=99"], ["--fault", "bounce"], ["--runs", "top"],
+                ["--force", "abc"]):
+        result = CliRunner().invoke(main, ["simulate", "--out", str(tmp_path / "x.h5"), *bad])
+        assert result.exit_code == 2, bad
+        assert len(result.output.strip().splitlines()) == 1, result.output
