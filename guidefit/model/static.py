@@ -472,7 +472,10 @@ def solve_equilibrium(guide, load, calibration: str = "nominal") -> Equilibrium:
             break
         k_i = e * c * a_pos ** (e - 1.0)
         h = (g * k_i[:, None]).T @ g + 1e-10 * h_ref
-        dq = np.linalg.solve(h, r)
+        try:
+            dq = np.linalg.solve(h, r)
+        except np.linalg.LinAlgError:  # coordinates no roller restrains (r has no part there)
+            dq = np.linalg.lstsq(h, r, rcond=None)[0]
         slope = float(r @ dq)  # = -grad . dq > 0
         p0 = potential(q)
         magnitude = np.sum(w_coef * a_pos ** (e + 1.0)) + abs(f @ q) + abs(f @ dq)
