@@ -420,7 +420,7 @@ def build_model(guide, effects=(), damping=None) -> _Model:
     base = apply_effects(nominal_spec, guide, linear_effects)
     contacts = None
     if amplitude:
-        contacts, spec = _nonlinear_contacts(base, guide, amplitude[0].parameters["preload_factor"], damping)
+        contacts, spec = _nonlinear_contacts(base, guide, amplitude[0].parameters["preload_factor"])
     else:
         spec = base
     solution = vib.solve_modes(spec)
@@ -432,7 +432,7 @@ def build_model(guide, effects=(), damping=None) -> _Model:
     return _Model(guide, effects, spec, solution, zeta, vib.solve_modes(nominal_spec), contacts)
 
 
-def _nonlinear_contacts(base, guide, preload_factor: float, damping):
+def _nonlinear_contacts(base, guide, preload_factor: float):
     """Nonlinear contacts built on the linear spec ``base``; returns (contacts, linearised spec)."""
     from guidefit.model import static
     from guidefit.model import vibration as vib
