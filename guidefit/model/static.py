@@ -629,7 +629,7 @@ def tangent_stiffness(guide, load=(0.0, 0.0, 0.0), calibration: str = "nominal")
         K_H_free=float(free[0]),
         K_gamma_free=float(free[4]),
         tangent_matrix=k,
-        delta_V=float(-q[1]),
+        delta_V=float(-q[1]) + 0.0,  # no negative zero
         delta_H=float(q[0]),
         gamma=float(q[4]),
         displacement_q=q,
@@ -751,7 +751,7 @@ def load_deflection(guide, direction: str = "V", max_load: float | None = None, 
         eq = solve_equilibrium(guide, value * unit, calibration)
         k = eq.tangent_matrix
         free = _free_stiffness(k)
-        rows.append((value, disp_sign * eq.displacement_q[q_index], k[q_index, q_index], free[q_index],
+        rows.append((value, disp_sign * eq.displacement_q[q_index] + 0.0, k[q_index, q_index], free[q_index],
                      len(eq.rows_lifted), int(np.sum(eq.approach_m <= 0.0))))
     k_free_col = k_col.replace("K_V", "K_V_free").replace("K_H", "K_H_free").replace("K_gamma", "K_gamma_free")
     frame = pd.DataFrame(rows, columns=[load_col, disp_col, k_col, k_free_col, "n_rows_lifted",
