@@ -497,7 +497,7 @@ def identify(path, guide=None, settings: IdentifySettings | None = None) -> Iden
     IdentificationError
         Valid file, but no result can be trusted: every hit rejected, no joint mode found (exit 1).
     """
-    from guidefit.frf import compute_frf
+    from guidefit.frf import WindowSettings, compute_frf
     from guidefit.hits import HitSettings, iter_hits
     from guidefit.model import vibration as vib
     from guidefit.model.guides import Guide, load_guide
@@ -523,7 +523,7 @@ def identify(path, guide=None, settings: IdentifySettings | None = None) -> Iden
 
         hits = tapped(iter_hits(run, settings.hits or HitSettings()))
         try:
-            frf = compute_frf(run, hits, estimator=settings.estimator, window=settings.window)
+            frf = compute_frf(run, hits, estimator=settings.estimator, window=settings.window or WindowSettings())
         except IdentificationError as exc:
             warnings.append(f"run '{run.name}': {exc}")
             continue
