@@ -406,7 +406,12 @@ def _as_effects(effects) -> tuple:
 
 
 def build_model(guide, effects=(), damping=None) -> _Model:
-    """The linear model (and nonlinear contacts if any effect needs them) of a simulation."""
+    """The linear model (and nonlinear contacts if any effect needs them) of a simulation.
+
+    >>> model = build_model("MRB35", ["added_mass:mass_kg=0.1"])
+    >>> round(model.solution.frequency_hz("vertical"), 1), model.contacts is None
+    (3451.5, True)
+    """
     from guidefit.model import vibration as vib
     from guidefit.model.effects import apply_effects
 
@@ -921,10 +926,26 @@ def simulate(guide, effects=(), config: SimulationConfig | None = None, seed: in
     >>> truth["parameters"]["f_V"]["value"] < truth["nominal_modes"][3]["frequency_hz"]
     True
     """
-    import contextlib
+    from guidefit.recording import RecordingData
 
-    from guidefit.recording import RecordingData, RunData
+    guide, config, faults, model = _prepare(guide, effects, config)
+    runs, runs_truth = [], {}
+    with _progress(progress, len(config.runs) * config.hits) as tick:
+        for run in config.runs:
+            hits_truth: list = []
+            blocks = list(_iter_run(model, config, run, seed, faults, hits_truth, tick))
+            data = np.stack(blocks) if config.layout == "hits" else np.concatenate(blocks)
+            runs.append(_run_data(config, model.guide, run, data))
+            runs_truth[run.name] = _run_truth(run, hits_truth)
+    recording = RecordingData(runs=tuple(runs), guide=guide.name, description=_description(seed))
+    return recording, _truth(model, config, seed, runs_truth, faults)
 
+
+def _description(seed: int) -> str:
+    return f"guidefit simulate, seed {seed}"
+
+
+def _prepare(guide, effects, config):
     config = SimulationConfig() if config is None else config
     guide = _as_guide(guide)
     _check_config(config, guide)
@@ -933,68 +954,100 @@ def simulate(guide, effects=(), config: SimulationConfig | None = None, seed: in
         if f.parameters["run"] not in ("all", *(r.name for r in config.runs)):
             raise ModelError(f"fault {f.name}: run '{f.parameters['run']}' not simulated; "
                              f"have {', '.join(r.name for r in config.runs)}")
-    model = build_model(guide, effects, config.damping)
-    fs = config.sample_rate_hz
-    n_rec = round(config.record_s * fs)
-    n_pre = round(config.pretrigger_s * fs)
-    n_gap = round(config.gap_s * fs)
+    return guide, config, faults, build_model(guide, effects, config.damping)
 
-    bar = contextlib.nullcontext()
-    task = None
-    if progress:
+
+class _progress:
+    """Context manager yielding a tick() callable; a rich bar on stderr when enabled."""
+
+    def __init__(self, enabled: bool, total: int):
+        self.enabled, self.total, self.bar = enabled, total, None
+
+    def __enter__(self):
+        if not self.enabled:
+            return lambda: None
         from rich.console import Console
         from rich.progress import Progress
 
-        bar = Progress(console=Console(stderr=True), transient=True)
-    runs, runs_truth = [], {}
-    with bar:
-        if progress:
-            task = bar.add_task("simulating hits", total=len(config.runs) * config.hits)
-        for run in config.runs:
-            channels = _channels(config, guide, run)
-            records, hits_truth = [], []
-            for i in range(config.hits):
-                hit_faults = _hit_faults(faults, run.name, i, config.hits)
-                data, t = _simulate_hit(model, config, run, channels, i, seed, hit_faults)
-                records.append(data)
-                hits_truth.append(t)
-                if progress:
-                    bar.advance(task)
-            if config.layout == "hits":
-                stored = np.stack(records).astype(np.float32)
-                for t in hits_truth:
-                    t["trigger_sample"] = n_pre
-            else:
-                parts = []
-                start = 0
-                for i, (rec, t) in enumerate(zip(records, hits_truth)):
-                    if i > 0 and n_gap:
-                        parts.append(_quiet(config, channels[0], n_gap, seed, run.name, i))
-                        start += n_gap
-                    t["record_start_sample"] = start
-                    t["trigger_sample"] = start + n_pre
-                    t["onset_s"] = start / fs + t["onset_s"]
-                    for p in t["pulses"]:
-                        p["onset_s"] += start / fs
-                    parts.append(rec)
-                    start += n_rec
-                stored = np.concatenate(parts).astype(np.float32)
-            d = np.asarray(run.direction, float)
-            runs.append(RunData(
-                name=run.name, sample_rate_hz=float(fs), excitation_direction=d / np.linalg.norm(d),
-                channel_names=channels[0], units=channels[1], positions_m=channels[2],
-                directions=channels[3], data=stored, layout=config.layout,
-                excitation_position_m=np.asarray(run.position_m, float),
-                pretrigger_samples=n_pre if config.layout == "hits" else None,
-            ))
-            runs_truth[run.name] = {
-                "excitation_position_m": list(map(float, run.position_m)),
-                "excitation_direction": [float(x) for x in d / np.linalg.norm(d)],
-                "hits": hits_truth,
-            }
-    recording = RecordingData(runs=tuple(runs), guide=guide.name,
-                              description=f"guidefit simulate, seed {seed}")
-    return recording, _truth(model, config, seed, runs_truth, faults)
+        self.bar = Progress(console=Console(stderr=True), transient=True)
+        self.bar.__enter__()
+        task = self.bar.add_task("simulating hits", total=self.total)
+        return lambda: self.bar.advance(task)
+
+    def __exit__(self, *exc):
+        if self.bar is not None:
+            self.bar.__exit__(*exc)
+        return False
+
+
+def _iter_run(model: _Model, config, run: HammerRun, seed: int, faults, hits_truth: list, tick):
+    """Blocks of one run in stored order (float32); appends each hit's truth to ``hits_truth``.
+
+    ``hits`` layout: one (n_samples, n_ch) record per hit. ``signals``: the records
+    back to back, with ``gap_s`` of noise between them.
+    """
+    fs = config.sample_rate_hz
+    n_rec, n_pre, n_gap = round(config.record_s * fs), round(config.pretrigger_s * fs), round(config.gap_s * fs)
+    channels = _channels(config, model.guide, run)
+    start = 0
+    for i in range(config.hits):
+        hit_faults = _hit_faults(faults, run.name, i, config.hits)
+        record, t = _simulate_hit(model, config, run, channels, i, seed, hit_faults)
+        if config.layout == "hits":
+            t["trigger_sample"] = n_pre
+        else:
+            if i > 0 and n_gap:
+                yield _quiet(config, channels[0], n_gap, seed, run.name, i).astype(np.float32)
+                start += n_gap
+            t["record_start_sample"] = start
+            t["trigger_sample"] = start + n_pre
+            t["onset_s"] += start / fs
+            for p in t["pulses"]:
+                p["onset_s"] += start / fs
+            start += n_rec
+        hits_truth.append(t)
+        tick()
+        yield record.astype(np.float32)
+
+
+def _run_data(config, guide, run: HammerRun, data=None):
+    from guidefit.recording import RunData
+
+    names, units, positions, directions = _channels(config, guide, run)
+    d = np.asarray(run.direction, float)
+    return RunData(
+        name=run.name, sample_rate_hz=float(config.sample_rate_hz), excitation_direction=d / np.linalg.norm(d),
+        channel_names=names, units=units, positions_m=positions, directions=directions, data=data,
+        layout=config.layout, excitation_position_m=np.asarray(run.position_m, float),
+        pretrigger_samples=round(config.pretrigger_s * config.sample_rate_hz) if config.layout == "hits" else None,
+    )
+
+
+def _run_truth(run: HammerRun, hits_truth: list) -> dict:
+    d = np.asarray(run.direction, float)
+    return {
+        "excitation_position_m": [float(x) for x in run.position_m],
+        "excitation_direction": [float(x) for x in d / np.linalg.norm(d)],
+        "hits": hits_truth,
+    }
+
+
+def _stream_h5(path: Path, guide, effects, config, seed: int, progress: bool) -> dict:
+    """Write a ``signals`` simulation to HDF5 block by block (bounded memory); return the truth."""
+    from guidefit.recording import open_signals_writer
+
+    guide, config, faults, model = _prepare(guide, effects, config)
+    runs_truth = {}
+    with _progress(progress, len(config.runs) * config.hits) as tick:
+        for k, run in enumerate(config.runs):
+            hits_truth: list = []
+            with open_signals_writer(path, _run_data(config, guide, run), guide=guide.name,
+                                     description=_description(seed), mode="w" if k == 0 else "a",
+                                     dtype=np.float32, compression="gzip") as writer:
+                for block in _iter_run(model, config, run, seed, faults, hits_truth, tick):
+                    writer.append(block)
+            runs_truth[run.name] = _run_truth(run, hits_truth)
+    return _truth(model, config, seed, runs_truth, faults)
 
 
 def _truth(model: _Model, config, seed, runs_truth, faults) -> dict:
@@ -1069,7 +1122,11 @@ def truth_json(truth: dict) -> str:
 
 
 def truth_path(path) -> Path:
-    """Where the truth of a recording goes: ``FILE.h5`` -> ``FILE.truth.json``."""
+    """Where the truth of a recording goes: ``FILE.h5`` -> ``FILE.truth.json``.
+
+    >>> truth_path("data/test.h5").name
+    'test.truth.json'
+    """
     path = Path(path)
     return path.with_name(path.stem + ".truth.json")
 
@@ -1091,7 +1148,8 @@ def write_simulation(path, guide, effects=(), config: SimulationConfig | None = 
     ----------
     path : str or Path
         Recording to write. HDF5 (``.h5``, gzip-compressed float32) holds every
-        run; CSV holds one run per file, so with several runs ``FILE.csv``
+        run; a continuous (``signals``) HDF5 recording is written block by block
+        in bounded memory. CSV holds one run per file, so with several runs ``FILE.csv``
         becomes ``FILE_<run>.csv`` per run. The truth goes to
         ``FILE.truth.json`` (:func:`truth_path`).
     guide, effects, config, seed, progress
@@ -1127,19 +1185,21 @@ def write_simulation(path, guide, effects=(), config: SimulationConfig | None = 
             path = path.with_suffix(".csv")
     elif suffix not in ("h5", "hdf5"):
         path = path.with_suffix(".h5")
-    recording, truth = simulate(guide, effects, config, seed, progress=progress)
-    written = []
-    if fmt == "h5":
-        write_recording(path, recording, compression="gzip")
-        written.append(path)
-    elif len(recording.runs) == 1:
-        write_recording(path, recording)
-        written.append(path)
+    if fmt == "h5" and config.layout == "signals":
+        truth = _stream_h5(path, guide, effects, config, seed, progress)
+        written = [path]
     else:
-        for run in recording.runs:
-            target = path.with_name(f"{path.stem}_{run.name}.csv")
-            write_recording(target, RecordingData((run,), recording.guide, recording.description))
-            written.append(target)
+        recording, truth = simulate(guide, effects, config, seed, progress=progress)
+        if fmt == "h5":
+            write_recording(path, recording, compression="gzip")
+            written = [path]
+        elif len(recording.runs) == 1:
+            write_recording(path, recording)
+            written = [path]
+        else:
+            written = [path.with_name(f"{path.stem}_{run.name}.csv") for run in recording.runs]
+            for target, run in zip(written, recording.runs):
+                write_recording(target, RecordingData((run,), recording.guide, recording.description))
     truth = {**truth, "recordings": [p.name for p in written]}
     target = truth_path(path)
     target.write_text(truth_json(truth), encoding="utf-8")

@@ -475,3 +475,17 @@ def test_cli_simulate_writes_files_and_reports_bad_input_in_one_line(tmp_path):
         result = CliRunner().invoke(main, ["simulate", "--out", str(tmp_path / "x.h5"), *bad])
         assert result.exit_code == 2, bad
         assert len(result.output.strip().splitlines()) == 1, result.output
+
+
+def test_continuous_hdf5_is_streamed_and_equals_the_in_memory_recording(tmp_path):
+    from guidefit.recording import read_block, read_recording
+
+    cfg = SimulationConfig(hits=3, record_s=0.005, layout="signals", gap_s=0.002, faults=("double_hit",))
+    data, truth = simulate(MRB35, (), cfg, seed=14)
+    out = write_simulation(tmp_path / "long.h5", MRB35, (), cfg, seed=14)
+    rec = read_recording(out.recordings[0])
+    for run, back in zip(data.runs, rec.runs):
+        assert back.layout == "signals" and np.array_equal(read_block(back), run.data)
+    assert out.truth["runs"] == truth["runs"]
+    hit = truth["runs"]["lateral"]["hits"][2]
+    assert hit["trigger_sample"] == 2 * (1000 + 400) + 200
