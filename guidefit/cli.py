@@ -222,6 +222,57 @@ def _map_files(files, guide_name, settings, jobs, console):
             progress.close()
 
 
+def _parse_window(text: str | None):
+    """``auto`` | ``none`` | ``force=SECONDS,tau=SECONDS,end=FRACTION`` -> WindowSettings."""
+    from guidefit.frf import WindowSettings
+
+    if text is None or text == "auto":
+        return WindowSettings()
+    if text == "none":
+        return WindowSettings(none=True)
+    keys = {"force": "force_window_s", "taper": "force_taper_s", "tau": "exp_tau_s", "end": "exp_end_fraction"}
+    values = {}
+    for item in text.split(","):
+        key, _, value = item.partition("=")
+        if key.strip() not in keys:
+            raise click.BadParameter(f"'{item}': use auto, none or force=S,taper=S,tau=S,end=FRACTION",
+                                     param_hint="--window")
+        try:
+            values[keys[key.strip()]] = float(value)
+        except ValueError:
+            raise click.BadParameter(f"'{item}': value must be a number", param_hint="--window") from None
+    try:
+        return WindowSettings(**values)
+    except (TypeError, ValueError) as exc:
+        raise click.BadParameter(str(exc), param_hint="--window") from None
+
+
+@main.command(name="frf")
+@click.argument("recording", type=click.Path(dir_okay=False))
+@click.option("--estimator", type=click.Choice(["H1", "H2", "Hv"]), default="H1", show_default=True)
+@click.option("--window", "window_text", default="auto", show_default=True,
+              help="auto | none | force=S,taper=S,tau=S,end=FRACTION (force window, exponential tau or "
+                   "its end level).")
+@click.option("--out", "out_path", type=click.Path(dir_okay=False),
+              help="frf.csv, frf.h5 or frf.uff (UFF-58, needs pyuff); default: a summary on the terminal.")
+def frf_cmd(recording, estimator, window_text, out_path):
+    """FRFs (H1/H2/Hv) and coherence of every response channel of any recording."""
+    from guidefit import report
+    from guidefit.identify import IdentifySettings, frf_of_recording
+
+    settings = IdentifySettings(estimator=estimator, window=_parse_window(window_text))
+    frfsets, warnings = frf_of_recording(recording, settings)
+    for w in warnings:
+        click.echo(f"guidefit: warning: {w}", err=True)
+    if out_path:
+        from guidefit.frf_io import write_frfs
+
+        write_frfs(out_path, frfsets)
+        click.echo(f"FRFs of {len(frfsets)} run(s) written to {out_path}")
+    else:
+        report.render_frf_summary(frfsets)
+
+
 @main.command(name="export")
 @click.argument("results", type=click.Path(dir_okay=False))
 @click.option("--format", "fmt", type=click.Choice(["nastran", "ansys", "abaqus", "json"]), default="json",

@@ -479,38 +479,15 @@ def _quality_warnings(modes, settings, warnings: list) -> None:
                             f"the curve-fit damping is the one to trust")
 
 
-def identify(path, guide=None, settings: IdentifySettings | None = None) -> Identification:
-    """Identify the joint modes and K_V, K_H, c_V, c_H of one recording.
+def run_frfs(recording, settings: IdentifySettings, warnings: list):
+    """Yield (run, FrfSet, hit rows) for every run that gives an FRF; problems go to ``warnings``.
 
-    Parameters
-    ----------
-    path : str or Path
-        HDF5 or CSV recording in the contract format.
-    guide : str, Path or Guide, optional
-        Overrides the file's ``guide`` attribute (default MRB35 when neither is given).
-    settings : IdentifySettings, optional
-
-    Raises
-    ------
-    RecordingError
-        Malformed file (exit 2).
-    IdentificationError
-        Valid file, but no result can be trusted: every hit rejected, no joint mode found (exit 1).
+    Hits stream from the file into the spectral sums (bounded memory); each
+    rejected hit is listed with its reason.
     """
     from guidefit.frf import WindowSettings, compute_frf
     from guidefit.hits import HitSettings, iter_hits
-    from guidefit.model import vibration as vib
-    from guidefit.model.guides import Guide, load_guide
-    from guidefit.recording import read_recording
 
-    settings = settings or IdentifySettings()
-    recording = read_recording(path)
-    if not isinstance(guide, Guide):
-        guide = load_guide(guide or recording.guide or "MRB35")
-    model = vib.solve_modes(vib.model_from_guide(guide))
-    warnings: list[str] = []
-    runs = []
-    all_modes: list[IdentifiedMode] = []
     for run in recording.runs:
         rows: list[dict] = []
 
@@ -530,6 +507,40 @@ def identify(path, guide=None, settings: IdentifySettings | None = None) -> Iden
         n_ok = sum(r["accepted"] for r in rows)
         if n_ok < settings.min_accepted_hits:
             warnings.append(f"run '{run.name}': only {n_ok} accepted hit(s); uncertainties are unreliable")
+        yield run, frf, rows
+
+
+def identify(path, guide=None, settings: IdentifySettings | None = None) -> Identification:
+    """Identify the joint modes and K_V, K_H, c_V, c_H of one recording.
+
+    Parameters
+    ----------
+    path : str or Path
+        HDF5 or CSV recording in the contract format.
+    guide : str, Path or Guide, optional
+        Overrides the file's ``guide`` attribute (default MRB35 when neither is given).
+    settings : IdentifySettings, optional
+
+    Raises
+    ------
+    RecordingError
+        Malformed file (exit 2).
+    IdentificationError
+        Valid file, but no result can be trusted: every hit rejected, no joint mode found (exit 1).
+    """
+    from guidefit.model import vibration as vib
+    from guidefit.model.guides import Guide, load_guide
+    from guidefit.recording import read_recording
+
+    settings = settings or IdentifySettings()
+    recording = read_recording(path)
+    if not isinstance(guide, Guide):
+        guide = load_guide(guide or recording.guide or "MRB35")
+    model = vib.solve_modes(vib.model_from_guide(guide))
+    warnings: list[str] = []
+    runs = []
+    all_modes: list[IdentifiedMode] = []
+    for run, frf, rows in run_frfs(recording, settings, warnings):
         modes = _fit_run(run, frf, guide, model, settings, warnings)
         all_modes.extend(modes)
         runs.append(RunResult(run.name, frf, rows, modes, tuple(run.excitation_direction),
@@ -545,6 +556,22 @@ def identify(path, guide=None, settings: IdentifySettings | None = None) -> Iden
     return Identification(str(path), guide, tuple(runs), tuple(modes), params, tuple(warnings),
                           tuple(extras), tuple(missing))
 
+
+
+
+def frf_of_recording(path, settings: IdentifySettings | None = None):
+    """FRF sets of every run of any recording (guideway or not) and the warnings.
+
+    Raises :class:`IdentificationError` when no run gives an FRF.
+    """
+    from guidefit.recording import read_recording
+
+    settings = settings or IdentifySettings()
+    warnings: list[str] = []
+    frfsets = [frf for _run, frf, _rows in run_frfs(read_recording(path), settings, warnings)]
+    if not frfsets:
+        raise IdentificationError(f"{path}: no run gave an FRF ({'; '.join(warnings) or 'no hits'})")
+    return frfsets, warnings
 
 
 from guidefit._api import make_callable  # noqa: E402

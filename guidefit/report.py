@@ -292,3 +292,23 @@ def render_batch_summary(rows: list[dict], outcomes: list, console=None) -> None
         table.add_row(row["file"], fmt(row.get("K_V_n_per_m")), fmt(row.get("K_H_n_per_m")),
                       fmt(row.get("c_V_ns_per_m")), fmt(row.get("c_H_ns_per_m")), outcome)
     console.print(table)
+
+
+def render_frf_summary(frfsets, console=None) -> None:
+    """Per run: resolution, averages and the coherence at the strongest peaks."""
+    import numpy as np
+    from rich.table import Table
+
+    console = console or _console()
+    table = Table(title="FRFs")
+    for col in ("run", "channels", "estimator", "hits", "resolution (Hz)", "strongest peak (Hz)",
+                "coherence there"):
+        table.add_column(col)
+    for frf in frfsets:
+        power = np.sum(np.abs(frf.H) ** 2, axis=1)
+        power[frf.frequency_hz < 20] = 0
+        i = int(np.argmax(power))
+        table.add_row(frf.run, str(len(frf.channels)), frf.estimator, str(frf.n_averages),
+                      f"{frf.frequency_hz[1] - frf.frequency_hz[0]:.3g}", f"{frf.frequency_hz[i]:.1f}",
+                      f"{float(np.mean(frf.coherence[i])):.3f}")
+    console.print(table)
