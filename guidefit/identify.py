@@ -403,6 +403,7 @@ def _fit_run(run, frf, guide, model, settings, warnings: list) -> list[Identifie
             "u_energy": contrib[0], "phi_energy": contrib[4], "shape": shape,
             "f_std": f_std, "z_std": z_std,
         })
+    candidates = _significant(candidates)
     labels = label_modes(candidates, model)
     out = []
     names = [ch.name for ch in frf_channels(run, frf)]
@@ -419,6 +420,30 @@ def _fit_run(run, frf, guide, model, settings, warnings: list) -> list[Identifie
             half_power=_half_power_entry(frf, mode, tau), raw_damping_ratio=float(mode.damping_ratio),
         ))
     return out
+
+
+MIN_RELATIVE_AMPLITUDE = 5e-3
+MAX_RELATIVE_FREQUENCY_STD = 5e-3
+
+
+def _significant(candidates: list[dict]) -> list[dict]:
+    """Drop computational modes of the curve fit: modes whose largest modal constant is below
+    0.5 % of the run's strongest mode, or whose frequency is uncertain by more than 0.5 %.
+
+    A real but weakly excited mode (an extra base mode, say) passes both tests
+    on any usable recording; a fitted pole that only absorbs noise or a flank
+    fails them.
+    """
+    if not candidates:
+        return candidates
+    top = max(float(np.max(np.abs(c["shape"]))) for c in candidates) or 1.0
+    keep = []
+    for c in candidates:
+        amplitude = float(np.max(np.abs(c["shape"]))) / top
+        rel_std = (c["f_std"] or 0.0) / c["frequency_hz"]
+        if amplitude >= MIN_RELATIVE_AMPLITUDE and rel_std <= MAX_RELATIVE_FREQUENCY_STD:
+            keep.append(c)
+    return keep
 
 
 def _combine(a: float | None, b: float | None) -> float | None:
