@@ -29,14 +29,15 @@ The fitted accelerance of channel ``r`` is
 
     H_r(\omega) = (j\omega)^2 \sum_k \left[ \frac{A_{rk}}{j\omega - p_k}
                  + \frac{A_{rk}^*}{j\omega - p_k^*} \right]
-                 + L_r + U_r (j\omega)^2
+                 + L_r + \frac{L1_r}{j\omega} + U_r (j\omega)^2
 
 with the pole in the upper half plane,
 ``p_k = -zeta_k w_k + j w_k sqrt(1 - zeta_k^2)`` (rad/s), ``w_k = 2 pi f_k``.
 The bracket is the displacement receptance (m/N), so ``A_rk`` is the residue
-of a *receptance* pole, in m/(N s). ``L_r`` (1/kg, real) is the mass line of
-modes below the band, ``U_r`` (m/N, real) the residual compliance of modes
-above it. For a structure with real (normal) modes, mass-normalised shape
+of a *receptance* pole, in m/(N s). The real residual terms stand for the
+modes outside the band (see :func:`fit_modes`): ``L_r`` (1/kg) the mass line
+of the modes below, ``L1_r`` their damping tail, ``U_r`` (m/N) the residual
+compliance of the modes above. For a structure with real (normal) modes, mass-normalised shape
 ``phi_k`` (kg^-1/2) and the hammer at point ``e``,
 
 .. math::
@@ -158,7 +159,12 @@ class Mode:
 
     @property
     def peak_frequency_hz(self) -> float:
-        """Frequency of the SDOF accelerance magnitude peak, ``f_n / sqrt(1 - 2 zeta^2)``."""
+        """Frequency of the SDOF accelerance magnitude peak, ``f_n / sqrt(1 - 2 zeta^2)``.
+
+        ``nan`` for ``zeta >= 1/sqrt(2)`` (no peak).
+        """
+        if 2.0 * self.damping_ratio**2 >= 1.0:
+            return math.nan
         return natural_from_peak_frequency(self.frequency_hz, self.damping_ratio, inverse=True)
 
     @property
@@ -1100,7 +1106,7 @@ def fit_band(
     order = np.argsort(wn)
     wn, z = wn[order], z[order]
     poles = _poles(wn, z)
-    B = prob.coefficients(poles)  # in normalised units (weights do not enter B)
+    B = prob.coefficients(poles)  # for unit-RMS channels
     std_wn, std_z = _covariance(prob, wn, z, B)
     B = B / prob.scale[None, :]
     modes = []
@@ -1115,7 +1121,7 @@ def fit_band(
                 f"fit_band: mode {k} at {fk:.1f} Hz, zeta={z[k]:.3g} is outside "
                 f"band_hz={band_hz} or at a damping bound; n_modes={n_modes} may be too many",
                 ModeFitWarning,
-                stacklevel=3,
+                stacklevel=2,
             )
         modes.append(mode)
     coef = {t: B[2 * n_modes + j].copy() for j, t in enumerate(terms)}
@@ -1236,6 +1242,7 @@ def auto_fit(
     *,
     min_prominence_db: float = 3.0,
     band_factor: float = 2.5,
+    grow: bool = True,
     refine: bool = True,
     **fit_kwargs,
 ) -> list[Mode]:
@@ -1246,8 +1253,14 @@ def auto_fit(
        if that fails) and the interval ``f_peak +/- band_factor * B``.
     2. Peaks whose intervals overlap form a group; each group is fitted by
        :func:`fit_band` with one mode per peak in the union of its intervals
-       (clipped to ``[f_min, f_max]``).
-    3. With ``refine`` (default), all modes are refitted together over the
+       (clipped to ``[f_min, f_max]``). Modes that end outside the band or at
+       a damping bound are dropped and the rest refitted.
+    3. With ``grow`` (default), a group gets up to two more modes while its
+       misfit exceeds 5 % and three times the noise level and an added mode
+       (started at a peak of the misfit, in a band widened to hold it) is well
+       determined and halves the squared misfit: a heavily damped mode next to
+       a light one often has no peak of its own.
+    4. With ``refine`` (default), all modes are refitted together over the
        union of the group bands, starting from the group results, so the
        flanks of neighbouring groups are modelled by modes instead of
        residual terms. The joint result replaces the group results unless it
@@ -1265,6 +1278,8 @@ def auto_fit(
         Passed to :func:`find_peaks`.
     band_factor : float, default 2.5
         Half-width of a peak's fit interval in half-power bandwidths.
+    grow : bool, default True
+        Add modes that have no peak of their own (step 3).
     refine : bool, default True
         Refit all modes jointly at the end.
     **fit_kwargs
@@ -1320,7 +1335,16 @@ def auto_fit(
             groups.append([it])
     lo_all, hi_all = max(f_min, f[0]), min(f_max, f[-1])
     modes, groups_fitted = [], []
-    for g in groups:
+    for j, g in enumerate(groups):
+        # the group's territory ends a half-power bandwidth short of the modes fitted
+        # so far below it and of the next group's peaks above it
+        below = [m.frequency_hz * (1 + 2 * m.damping_ratio) for m in modes]
+        t_lo = max([lo_all, *below])
+        t_hi = (
+            hi_all
+            if j == len(groups) - 1
+            else min(hi_all, min(it[0] * (1 - 2 * it[1]) for it in groups[j + 1]))
+        )
         band = _widen(
             f,
             max(min(it[2] for it in g), lo_all),
@@ -1329,10 +1353,11 @@ def auto_fit(
             lo_all,
             hi_all,
         )
-        kept = _fit_dropping(f, Hf, band, [(it[0], it[1]) for it in g], fit_kwargs)
-        if kept:
-            modes.extend(kept)
-            groups_fitted.append((band, kept))
+        fit = _fit_dropping(f, Hf, band, [(it[0], it[1]) for it in g], fit_kwargs)
+        if fit is not None:
+            fit = _grow(f, Hf, fit, (t_lo, t_hi), fit_kwargs) if grow else fit
+            modes.extend(fit.modes)
+            groups_fitted.append((fit.band_hz, fit.modes))
     if not modes:
         raise IdentificationError(
             f"auto_fit: no mode could be fitted between f_min={f_min} Hz and f_max={f_max} Hz"
@@ -1368,21 +1393,94 @@ def _widen(f, lo, hi, n_modes, lo_all, hi_all, min_bins=None):
     return lo, hi
 
 
-def _fit_dropping(f, H, band, init, fit_kwargs):
-    """Fit a group; drop modes that end outside the band or at a bound, refit; [] if none."""
+def _quiet_fit(f, H, band, init, fit_kwargs) -> BandFit | None:
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ModeFitWarning)
+            return fit_band(f, H, band, len(init), init, **fit_kwargs)
+    except ValueError:  # too few bins for this many modes
+        return None
+
+
+def _fit_dropping(f, H, band, init, fit_kwargs) -> BandFit | None:
+    """Fit a group; drop modes that end outside the band or at a bound, refit; None if none."""
     while init:
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", ModeFitWarning)
-                fit = fit_band(f, H, band, len(init), init, **fit_kwargs)
-        except ValueError:  # too few bins for this many modes
+        fit = _quiet_fit(f, H, band, init, fit_kwargs)
+        if fit is None:
             init = init[:-1]
             continue
         good = [m for m in fit.modes if not _suspicious(m, band[0], band[1])]
         if len(good) == len(fit.modes):
-            return good
+            return fit
         init = good
-    return []
+    return None
+
+
+def _noise_nrmse(f, H, band) -> float:
+    """Misfit that noise alone would leave, in the units of BandFit.nrmse."""
+    sel = (f >= band[0]) & (f <= band[1])
+    power = np.mean(np.abs(H[sel]) ** 2, axis=0)
+    used = power > 0
+    return math.sqrt(float(np.mean(_noise_power(H[sel])[used] / power[used])) / 2.0)
+
+
+def _misfit(f, H, band, fit: BandFit) -> float:
+    """Relative misfit (as BandFit.nrmse, unweighted) of a fit's model over ``band``."""
+    sel = (f >= band[0]) & (f <= band[1])
+    power = np.mean(np.abs(H[sel]) ** 2, axis=0)
+    power[power == 0] = 1.0
+    E = H[sel] - synthesize(f[sel], fit.modes, fit.residuals)
+    return math.sqrt(float(np.mean(np.mean(np.abs(E) ** 2, axis=0) / power)))
+
+
+def _grow(f, H, fit: BandFit, territory, fit_kwargs, max_extra=2) -> BandFit:
+    """Add modes a group misses (e.g. a heavily damped mode without a peak of its own).
+
+    While the group's misfit exceeds both 5 % and three times the noise
+    level (smaller misfits are mostly band truncation), a mode is tried at each of the strongest peaks of the misfit, in a band
+    widened (within ``territory``, which ends short of the neighbouring
+    groups' peaks) to 2.5 of its half-power bandwidths either side. The best
+    trial is kept if all its modes lie inside its band with a free damping
+    ratio, the new mode is well determined (standard deviations below 10 %
+    of its bandwidth and 30 % of its damping ratio) and it halves the squared
+    misfit over the group's band.
+    """
+    band = fit.band_hz
+    noise = _noise_nrmse(f, H, band)
+    for _ in range(max_extra):
+        current = _misfit(f, H, band, fit)
+        if current <= max(0.05, 3.0 * noise):
+            break
+        sel = (f >= fit.band_hz[0]) & (f <= fit.band_hz[1])
+        E = H[sel] - synthesize(f[sel], fit.modes, fit.residuals)
+        cand = _peak_guesses(f[sel], E, 3, min_prominence_db=0.5, min_snr_db=None)
+        i = int(np.argmax(mode_indicator(f[sel], E)))
+        cand.append((float(f[sel][i]), 0.05))
+        best, best_misfit = None, current
+        for fc, zc in cand:
+            half = 5.0 * min(max(zc, 0.005), 0.3) * fc
+            lo = max(min(fit.band_hz[0], fc - half), territory[0])
+            hi = min(max(fit.band_hz[1], fc + half), territory[1])
+            if not lo < fc < hi:
+                continue
+            trial = _quiet_fit(
+                f, H, (lo, hi), [*fit.modes, (fc, min(max(zc, 0.005), 0.3))], fit_kwargs
+            )
+            if trial is None or any(_suspicious(m, lo, hi) for m in trial.modes):
+                continue
+            new = min(trial.modes, key=lambda m: abs(m.frequency_hz - fc))
+            bandwidth = 2.0 * new.damping_ratio * new.frequency_hz
+            if not (
+                new.frequency_std_hz < 0.1 * bandwidth and new.damping_std < 0.3 * new.damping_ratio
+            ):
+                continue
+            m = _misfit(f, H, band, trial)
+            if m < best_misfit:
+                best, best_misfit = trial, m
+        if best is None or best_misfit**2 > 0.5 * current**2:
+            break
+        fit = best
+    return fit
 
 
 def synthesize(frequency_hz, modes: Sequence[Mode], residuals: dict | None = None) -> np.ndarray:

@@ -370,6 +370,29 @@ def test_auto_fit_finds_and_fits_everything(df, noise, kind):
         assert np.array_equal(np.sign(m.modal_constants.real), np.sign(c))
 
 
+def test_auto_fit_adds_heavily_damped_mode_without_peak():
+    """Vertical hit on the nominal carriage: roll_low (10.5 %) is weak and has no
+    peak of its own between pitch and the vertical mode; auto_fit must add it."""
+    truth = [
+        (2276.0, 0.02, [0.0, -0.092, 0.0, 0.092]),
+        (2496.0, 0.105, [0.024, -0.012, 0.024, 0.012]),
+        (3529.0, 0.029, [0.0, -0.455, 0.0, -0.455]),
+        (5564.0, 0.02, [-0.024, -0.036, -0.024, 0.036]),
+    ]
+    f = np.arange(10.0, 8000.0, 10.0)
+    H = synthesize(f, [make_mode(*t) for t in truth])
+    rng = np.random.default_rng(0)
+    H = H * (1 + 0.01 * (rng.standard_normal(H.shape) + 1j * rng.standard_normal(H.shape)))
+    peaks = find_peaks(f, H, f_min=500.0, f_max=7000.0)
+    assert peaks.frequency_hz.size == 3 and np.all(np.abs(peaks.frequency_hz - 2496.0) > 100.0)
+    modes = auto_fit(f, H, 500.0, 7000.0)
+    assert len(modes) == 4
+    for m, (fn, zeta, c) in zip(modes, truth):
+        assert abs(rel(m.frequency_hz, fn)) < 1e-3
+        assert abs(rel(m.damping_ratio, zeta)) < 0.05
+        np.testing.assert_allclose(m.modal_constants.real, c, atol=0.01 * max(np.abs(c)) + 2e-3)
+
+
 def test_auto_fit_no_peak():
     f = np.arange(10.0, 1000.0, 2.0)
     H = sdof_accelerance(f, 3000.0, 0.02)
