@@ -322,12 +322,13 @@ def _half_power_entry(frf, mode, tau_s) -> dict | None:
             hp = modes_mod.half_power(frf.frequency_hz, frf.H[:, channel], peak)
     except (IdentificationError, ValueError):
         return None
-    zeta = hp.zeta
-    f_n = hp.f_peak_hz
+    # Eq. (26)/(28) as printed divide by the |H| peak; the exact SDOF accelerance relation gives f_n
+    sdof = modes_mod.sdof_from_half_power(hp.f1_hz, hp.f2_hz)
+    f_n, zeta = sdof.f_n_hz, sdof.zeta
     if tau_s:
-        f_n, zeta = frf_mod.exponential_window_damping_correction(hp.zeta, hp.f_peak_hz, tau_s)
+        f_n, zeta = frf_mod.exponential_window_damping_correction(sdof.zeta, sdof.f_n_hz, tau_s)
     return {"f_peak_hz": hp.f_peak_hz, "f1_hz": hp.f1_hz, "f2_hz": hp.f2_hz, "zeta": hp.zeta,
-            "zeta_window_corrected": zeta, "channel": frf.channels[channel],
+            "f_n_hz": f_n, "zeta_window_corrected": zeta, "channel": frf.channels[channel],
             "bins_in_band": int(round((hp.f2_hz - hp.f1_hz) / (frf.frequency_hz[1] - frf.frequency_hz[0])))}
 
 
