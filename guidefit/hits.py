@@ -1,0 +1,804 @@
+"""Hits of a run: detection in continuous records and per-hit quality checks.
+
+A run stores either one record per hit (layout ``hits``) or one continuous
+record (layout ``signals``). :func:`iter_hits` turns both into a stream of
+:class:`Hit` records of equal length, reading the file in bounded memory:
+
+- ``hits`` layout: one Hit per stored record, in file order.
+- ``signals`` layout: the force channel is streamed in chunks (never the
+  whole signal) to find *triggers*: rising crossings of ``|f - mean(f)|``
+  through the trigger level, at most one per hold-off time. Each hit's record
+  starts ``pretrigger`` samples before its trigger; every record of a run has
+  the same length (see :class:`HitSettings` for how it is chosen). Then each
+  record is read with :func:`guidefit.recording.read_block`.
+
+Every record is checked; a hit that fails a check is yielded with
+``accepted=False``, ``data=None`` and a reason, never dropped. The checks, in
+order (the first two end the assessment; the others are all reported):
+
+``non_finite``
+    NaN or Inf in any channel.
+``negative``
+    The largest force excursion is negative: the hit pushed against
+    ``excitation_direction`` (a wrong sign in the file, or a rebound).
+``too_weak``
+    Peak force below ``min_peak_force_n`` or below ``min_peak_fraction`` of the
+    run's median peak.
+``double_hit``
+    A second impact: the force, after (or before) the main pulse, rises again
+    above ``double_hit_ratio`` (10 %) of the peak, however soon after the main
+    pulse ends (the pulse ends where the force falls below
+    ``pulse_end_fraction``, 5 %, of the peak); or the main pulse has two humps
+    separated by a dip deeper than ``double_hit_ratio`` of the peak. This is a
+    time-domain test; spectral tests miss second impacts that come soon
+    after the first.
+``clipped``
+    Overload of any channel: a run of at least ``clip_min_run`` consecutive
+    samples exactly at the channel's extreme value (the side of its largest
+    |value|) whose edges are steeper than a smooth quantised peak allows. A
+    smooth peak of a quantised signal repeats its top code over m samples only
+    if its curvature is small, and then the signal ``max(2, m // 4)`` samples
+    beyond the run lies within a few LSB of the top; a clipped signal drops
+    much faster. The limit is ``4 + 96 / (m - 2)^2`` LSB, the LSB being the
+    smallest step between distinct values of the channel in the record (for
+    unquantised data: tiny, so any exact flat top of m >= 3 samples with an
+    edge counts). It was set from 40 000 simulated 12- to 16-bit decaying
+    oscillations (3 to 20 000 samples per period, 0-5 LSB of noise): none of
+    the unclipped ones exceeds it, and all but 4 of 37 848 clipped by 5 % or
+    more (with a flat top of 3 or more samples) do; ``tests/test_hits.py``
+    repeats a smaller version. A channel stuck at one non-zero value over the
+    whole record counts as clipped too.
+``not_decayed``
+    A response channel has not died out by the end of the record: the RMS of
+    its last ``decay_end_fraction`` (5 %) of samples, times sqrt(2), exceeds
+    ``max_end_ratio`` (10 %) of its peak |value| (both after removing the
+    pre-trigger baseline) and exceeds 3 times the pre-trigger noise RMS.
+``incomplete``, ``overlap`` (``signals`` layout only)
+    The record would start before or end after the signal, or it would
+    overlap the previous hit's record (the previous impact is less than one
+    record length before).
+
+The reason string is ``"<code>: <detail>"``, several joined by ``"; "``;
+:attr:`Hit.codes` holds the codes alone.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Iterator, Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+
+import numpy as np
+
+from guidefit.errors import GuidefitError
+from guidefit.recording import Run, read_block, read_hit
+
+__all__ = [
+    "CHUNK_SAMPLES",
+    "REJECTION_CODES",
+    "Hit",
+    "HitSettings",
+    "HitSettingsError",
+    "check_hit",
+    "iter_hits",
+    "summarise_hits",
+]
+
+CHUNK_SAMPLES = 1_000_000
+"""Samples of the force channel read per step when scanning a ``signals`` run."""
+
+DEFAULT_PRETRIGGER_S = 1e-3
+
+REJECTION_CODES = {
+    "non_finite": "NaN or Inf samples in a channel",
+    "negative": "the force points against excitation_direction",
+    "too_weak": "peak force below the minimum",
+    "double_hit": "a second impact in the record",
+    "clipped": "a channel is flat at its extreme (overload)",
+    "not_decayed": "a response has not died out by the end of the record",
+    "incomplete": "the record would run outside the signal",
+    "overlap": "the record overlaps the previous hit's record",
+}
+"""Codes of :attr:`Hit.codes` and what they mean."""
+
+
+class HitSettingsError(GuidefitError, ValueError):
+    """A :class:`HitSettings` value is out of range (exit status 2)."""
+
+
+@dataclass(frozen=True)
+class HitSettings:
+    """How hits are found and checked. Times in s, forces in N, ratios as fractions.
+
+    Parameters
+    ----------
+    trigger_level_n : float, optional
+        Absolute trigger level on ``|force - mean(force)|``, N. Default: relative.
+    trigger_fraction : float
+        Relative trigger level: this fraction of the run's largest
+        ``|force - mean(force)|``, found in a first streaming pass (default 0.05).
+    pretrigger_s : float, optional
+        Record start before the trigger. Default: the file's
+        ``pretrigger_samples`` if given, else 1 ms, shortened to the first
+        trigger's position if that comes earlier in the signal.
+    record_length_s : float, optional
+        Length of every record (pretrigger included). Default for ``signals``:
+        the shortest spacing between triggers (ignoring spacings below half the
+        median, which are double hits), at most ``max_record_length_s``, and
+        shortened to fit the last hit when at least half of it fits; for
+        ``hits``: the stored length. A set value is never changed: records
+        that do not fit are rejected.
+    max_record_length_s : float
+        Upper bound of the default record length (0.5 s).
+    holdoff_s : float
+        After a trigger, no new trigger for this long (5 ms); a second impact
+        within it is judged by the double-hit check.
+    min_peak_force_n : float, optional
+        Absolute minimum peak force, N.
+    min_peak_fraction : float
+        Minimum peak force as a fraction of the run's median peak (0.05).
+    double_hit_ratio : float
+        A second impact counts from this fraction of the main peak (0.10).
+    pulse_end_fraction : float
+        The main pulse ends where the force falls below this fraction of
+        its peak (0.05).
+    clip_min_run : int
+        Shortest flat run at a channel's extreme that can count as clipping (3).
+    decay_end_fraction : float
+        Share of the record at its end over which the decay is judged (0.05).
+    max_end_ratio : float
+        Largest allowed end amplitude, as a fraction of the channel's peak (0.10).
+
+    Examples
+    --------
+    >>> HitSettings(record_length_s=0.2).holdoff_s
+    0.005
+    >>> HitSettings(trigger_fraction=2.0)
+    Traceback (most recent call last):
+    ...
+    guidefit.hits.HitSettingsError: HitSettings: trigger_fraction is 2.0; expected a number in (0, 1)
+    """
+
+    trigger_level_n: float | None = None
+    trigger_fraction: float = 0.05
+    pretrigger_s: float | None = None
+    record_length_s: float | None = None
+    max_record_length_s: float = 0.5
+    holdoff_s: float = 0.005
+    min_peak_force_n: float | None = None
+    min_peak_fraction: float = 0.05
+    double_hit_ratio: float = 0.10
+    pulse_end_fraction: float = 0.05
+    clip_min_run: int = 3
+    decay_end_fraction: float = 0.05
+    max_end_ratio: float = 0.10
+
+    def __post_init__(self):
+        fractions = (
+            "trigger_fraction",
+            "double_hit_ratio",
+            "pulse_end_fraction",
+            "decay_end_fraction",
+            "max_end_ratio",
+        )
+        for name in fractions:
+            value = getattr(self, name)
+            if not _is_number(value) or not 0 < value < 1:
+                raise HitSettingsError(
+                    f"HitSettings: {name} is {value!r}; expected a number in (0, 1)"
+                )
+        if not _is_number(self.min_peak_fraction) or not 0 <= self.min_peak_fraction < 1:
+            raise HitSettingsError(
+                f"HitSettings: min_peak_fraction is {self.min_peak_fraction!r}; expected a number in [0, 1)"
+            )
+        positive = ("trigger_level_n", "record_length_s", "max_record_length_s", "holdoff_s")
+        for name in positive:
+            value = getattr(self, name)
+            if value is None and name in ("trigger_level_n", "record_length_s"):
+                continue
+            if not _is_number(value) or not value > 0:
+                raise HitSettingsError(
+                    f"HitSettings: {name} is {value!r}; expected a positive number"
+                )
+        for name in ("pretrigger_s", "min_peak_force_n"):
+            value = getattr(self, name)
+            if value is not None and (not _is_number(value) or value < 0):
+                raise HitSettingsError(f"HitSettings: {name} is {value!r}; expected a number >= 0")
+        if not isinstance(self.clip_min_run, (int, np.integer)) or self.clip_min_run < 3:
+            raise HitSettingsError(
+                f"HitSettings: clip_min_run is {self.clip_min_run!r}; expected an integer >= 3"
+            )
+        if self.pulse_end_fraction >= self.double_hit_ratio:
+            raise HitSettingsError(
+                f"HitSettings: pulse_end_fraction ({self.pulse_end_fraction}) must be below "
+                f"double_hit_ratio ({self.double_hit_ratio})"
+            )
+
+
+def _is_number(value) -> bool:
+    return (
+        isinstance(value, (int, float, np.integer, np.floating))
+        and not isinstance(value, bool)
+        and math.isfinite(value)
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class Hit:
+    """One hit of a run, accepted or rejected.
+
+    Attributes
+    ----------
+    run : str
+        Run name.
+    index : int
+        Hit number within the run: the stored record (``hits``) or the trigger
+        in time order (``signals``), counting rejected hits too.
+    start_sample : int
+        First sample of the record in the run's continuous signal (``signals``);
+        0 for stored records (``hits``).
+    data : ndarray, shape (n_samples, n_channels), or None
+        float64 SI samples of all channels in the run's column order
+        (read-only); None if rejected. Raw: no baseline removed, no window.
+    peak_force_n : float
+        Signed extreme of the force after removing its pre-trigger baseline, N
+        (negative for a ``negative`` hit; NaN if it cannot be told).
+    accepted : bool
+    reason : str or None
+        Why it was rejected: ``"<code>: <detail>"``, several joined by ``"; "``.
+    pretrigger_samples : int or None
+        Samples before the trigger in the record (for stored hits without the
+        attribute: where the force first reaches the trigger level).
+    codes : tuple of str
+        The rejection codes (keys of :data:`REJECTION_CODES`); empty if accepted.
+    metrics : mapping of str to float
+        ``pulse_width_s`` (main pulse above ``pulse_end_fraction`` of the peak),
+        ``second_impact_ratio`` (largest other impact / peak), ``end_ratio``
+        (worst response end amplitude / peak); NaN where not computed.
+    """
+
+    run: str
+    index: int
+    start_sample: int
+    data: np.ndarray | None
+    peak_force_n: float
+    accepted: bool
+    reason: str | None
+    pretrigger_samples: int | None = None
+    codes: tuple[str, ...] = ()
+    metrics: Mapping[str, float] = field(default_factory=dict)
+
+    def __post_init__(self):
+        object.__setattr__(self, "metrics", MappingProxyType(dict(self.metrics)))
+        object.__setattr__(self, "codes", tuple(self.codes))
+
+
+_METRICS = ("pulse_width_s", "second_impact_ratio", "end_ratio")
+
+
+def summarise_hits(hits: Iterable[Hit]):
+    """One row per hit as a pandas DataFrame (for tables and reports).
+
+    Columns: ``run, index, start_sample, pretrigger_samples, peak_force_n,
+    accepted, codes, reason, pulse_width_s, second_impact_ratio, end_ratio``.
+
+    Examples
+    --------
+    >>> hit = Hit("vertical", 0, 0, None, 12.5, False, "too_weak: peak 12.5 N", codes=("too_weak",))
+    >>> summarise_hits([hit])[["index", "accepted", "codes"]].to_dict("records")
+    [{'index': 0, 'accepted': False, 'codes': 'too_weak'}]
+    """
+    import pandas as pd
+
+    columns = [
+        "run",
+        "index",
+        "start_sample",
+        "pretrigger_samples",
+        "peak_force_n",
+        "accepted",
+        "codes",
+        "reason",
+    ]
+    rows = []
+    for hit in hits:
+        row = {
+            "run": hit.run,
+            "index": hit.index,
+            "start_sample": hit.start_sample,
+            "pretrigger_samples": hit.pretrigger_samples,
+            "peak_force_n": hit.peak_force_n,
+            "accepted": hit.accepted,
+            "codes": ",".join(hit.codes),
+            "reason": hit.reason,
+        }
+        row.update({k: hit.metrics.get(k, math.nan) for k in _METRICS})
+        rows.append(row)
+    return pd.DataFrame(rows, columns=columns + list(_METRICS))
+
+
+# ------------------------------------------------------------------ checks
+
+
+def check_hit(
+    run: Run,
+    data: np.ndarray,
+    settings: HitSettings | None = None,
+    *,
+    index: int = 0,
+    start_sample: int = 0,
+    pretrigger_samples: int | None = None,
+    median_peak_n: float | None = None,
+) -> Hit:
+    """Run the quality checks on one record of ``run`` and return the Hit.
+
+    Parameters
+    ----------
+    run : Run
+        Gives the channel names, the force column and the sample rate.
+    data : ndarray, shape (n_samples, n_channels)
+        float64 SI samples, as from :func:`guidefit.recording.read_hit`.
+    settings : HitSettings, optional
+    index, start_sample : int
+        Copied into the Hit.
+    pretrigger_samples : int, optional
+        Samples before the trigger; with 16 or more, the baseline and noise
+        are taken from them, else the baseline is the record's median.
+    median_peak_n : float, optional
+        The run's median peak force, for the ``too_weak`` check.
+
+    Returns
+    -------
+    Hit
+    """
+    settings = HitSettings() if settings is None else settings
+    data = np.array(data, dtype=np.float64)  # a copy: the Hit's data is read-only
+    if data.ndim != 2 or data.shape[1] != run.n_channels:
+        raise ValueError(
+            f"data has shape {data.shape}; expected (n_samples, {run.n_channels}) for run '{run.name}'"
+        )
+    return _check(run, data, settings, index, start_sample, pretrigger_samples, median_peak_n)
+
+
+def _check(run, data, settings, index, start_sample, pretrigger_samples, median_peak_n) -> Hit:
+    """Assess ``data`` (float64, owned by the caller's new Hit) and build the Hit."""
+    codes, reasons, peak, trigger, metrics = _assess(
+        data, run, settings, pretrigger_samples, median_peak_n
+    )
+    if codes:
+        return Hit(
+            run.name,
+            index,
+            start_sample,
+            None,
+            peak,
+            False,
+            "; ".join(reasons),
+            trigger,
+            codes,
+            metrics,
+        )
+    data.setflags(write=False)
+    return Hit(run.name, index, start_sample, data, peak, True, None, trigger, (), metrics)
+
+
+def _assess(data, run: Run, s: HitSettings, pre: int | None, median_peak):
+    """(codes, reasons, signed peak, pretrigger, metrics) of one record."""
+    names = run.channel_names
+    fs = run.sample_rate_hz
+    fi = run.force_index
+    n = data.shape[0]
+    metrics = dict.fromkeys(_METRICS, math.nan)
+    finite = np.isfinite(data)
+    if not finite.all():
+        bad = [names[c] for c in np.flatnonzero(~finite.all(axis=0))]
+        force = data[:, fi][finite[:, fi]]
+        peak = _signed_extreme(force - np.median(force)) if force.size else math.nan
+        count = int((~finite).sum())
+        return (
+            ["non_finite"],
+            [f"non_finite: {count} NaN/Inf sample(s) in {', '.join(bad)}"],
+            peak,
+            pre,
+            metrics,
+        )
+    quiet = slice(0, pre - 2) if pre is not None and pre >= 16 else None
+    force = data[:, fi]
+    fc = force - (np.median(force[quiet]) if quiet else np.median(force))
+    p = int(np.argmax(np.abs(fc)))
+    peak = float(fc[p])
+    if peak <= 0:
+        if peak == 0:
+            return ["too_weak"], ["too_weak: the force is flat"], peak, pre, metrics
+        return (
+            ["negative"],
+            [
+                f"negative: force peak {peak:.4g} N points against excitation_direction (force sign or direction wrong?)"
+            ],
+            peak,
+            pre,
+            metrics,
+        )
+    if (
+        pre is None
+    ):  # stored hit without pretrigger_samples: where the force reaches the trigger level
+        level = s.trigger_level_n if s.trigger_level_n is not None else s.trigger_fraction * peak
+        pre = int(np.argmax(fc >= min(level, peak)))
+    codes, reasons = [], []
+
+    limit, why = 0.0, ""
+    if s.min_peak_force_n is not None:
+        limit, why = s.min_peak_force_n, "the minimum"
+    if (
+        median_peak is not None
+        and math.isfinite(median_peak)
+        and s.min_peak_fraction * median_peak > limit
+    ):
+        limit = s.min_peak_fraction * median_peak
+        why = f"{s.min_peak_fraction:.0%} of the run's median peak {median_peak:.4g} N"
+    if peak < limit:
+        codes.append("too_weak")
+        reasons.append(f"too_weak: peak {peak:.4g} N below {limit:.4g} N ({why})")
+
+    double = _double_hit(fc, p, peak, fs, s, metrics)
+    if double:
+        codes.append("double_hit")
+        reasons.append(f"double_hit: {double}")
+
+    clipped = []
+    for c in range(data.shape[1]):
+        flat = _flat_top(data[:, c], s.clip_min_run)
+        if flat is not None:
+            m, value = flat
+            unit = run.channels[c].unit_si
+            clipped.append(f"{names[c]} ({m} samples at {value:.6g} {unit})")
+    if clipped:
+        codes.append("clipped")
+        reasons.append(f"clipped: {', '.join(clipped)}")
+
+    n_end = max(8, math.ceil(s.decay_end_fraction * n))
+    worst = 0.0
+    slow = []
+    for c in run.response_indices:
+        x = data[:, c]
+        x = x - (np.median(x[quiet]) if quiet else np.median(x))
+        top = float(np.max(np.abs(x)))
+        if top == 0 or n_end >= n:
+            continue
+        rms_end = float(np.sqrt(np.mean(x[-n_end:] ** 2)))
+        noise = float(np.sqrt(np.mean(x[quiet] ** 2))) if quiet else 0.0
+        ratio = rms_end * math.sqrt(2) / top
+        worst = max(worst, ratio)
+        if ratio > s.max_end_ratio and rms_end > 3 * noise:
+            slow.append(f"{names[c]} ends at {ratio:.0%} of its peak")
+    metrics["end_ratio"] = worst
+    if slow:
+        codes.append("not_decayed")
+        reasons.append(
+            f"not_decayed: {', '.join(slow)} (limit {s.max_end_ratio:.0%}, a longer record helps)"
+        )
+    return codes, reasons, peak, pre, metrics
+
+
+def _signed_extreme(x: np.ndarray) -> float:
+    if x.size == 0:
+        return math.nan
+    hi, lo = float(np.max(x)), float(np.min(x))
+    return hi if hi >= -lo else lo
+
+
+def _double_hit(
+    fc: np.ndarray, p: int, peak: float, fs: float, s: HitSettings, metrics: dict
+) -> str:
+    """Describe a second impact in the (baseline-free, positive-peak) force, or ''."""
+    above = fc > s.pulse_end_fraction * peak
+    edges = np.diff(above.astype(np.int8))
+    starts = np.flatnonzero(edges == 1) + 1
+    ends = np.flatnonzero(edges == -1) + 1
+    if above[0]:
+        starts = np.r_[0, starts]
+    if above[-1]:
+        ends = np.r_[ends, fc.size]
+    # between segments the force is below the pulse-end level, so a max from
+    # one start to the next is the segment's own max
+    seg_max = np.maximum.reduceat(fc, starts)
+    main = int(np.searchsorted(starts, p, side="right") - 1)
+    s0, e0 = int(starts[main]), int(ends[main])
+    metrics["pulse_width_s"] = (e0 - s0) / fs
+    impacts = np.flatnonzero(seg_max >= s.double_hit_ratio * peak)
+    others = impacts[impacts != main]
+    if others.size:
+        k = int(others[np.argmax(seg_max[others])])
+        q = int(starts[k]) + int(np.argmax(fc[starts[k] : ends[k]]))
+        ratio = float(seg_max[k]) / peak
+        metrics["second_impact_ratio"] = ratio
+        gap_ms = ((starts[k] - e0) if k > main else (s0 - ends[k])) / fs * 1e3
+        when = "after" if k > main else "before"
+        return (
+            f"second impact of {ratio:.0%} of the peak {abs(q - p) / fs * 1e3:.3g} ms {when} it "
+            f"({gap_ms:.3g} ms {when} the main pulse {'ends' if k > main else 'starts'})"
+        )
+    seg = fc[s0:e0]
+    left = np.maximum.accumulate(seg)
+    right = np.maximum.accumulate(seg[::-1])[::-1]
+    floor = np.minimum(left, right)
+    depth = floor - seg
+    j = int(np.argmax(depth))
+    metrics["second_impact_ratio"] = (
+        float(floor[j]) / peak if depth[j] >= s.double_hit_ratio * peak else 0.0
+    )
+    if depth[j] >= s.double_hit_ratio * peak:
+        return (
+            f"two peaks within one pulse, {depth[j] / peak:.0%} of the peak deep dip between them"
+        )
+    return ""
+
+
+def _flat_top(x: np.ndarray, min_run: int) -> tuple[int, float] | None:
+    """(run length, value) of a clipped flat top of ``x``, or None.
+
+    A run of m >= ``min_run`` equal samples at the channel's extreme (the side
+    of its largest |value|) counts when, ``max(2, m // 4)`` samples beyond both
+    of its ends, the signal lies more than ``4 + 96 / (m - 2)**2`` LSB below it.
+    """
+    n = x.size
+    biggest = float(np.max(np.abs(x)))
+    if biggest == 0:
+        return None
+    lsb = None
+    for value in {float(np.max(x)), float(np.min(x))}:
+        if abs(value) < 0.9 * biggest:
+            continue
+        at = np.flatnonzero(x == value)
+        if at.size < min_run:
+            continue
+        breaks = np.flatnonzero(np.diff(at) > 1)
+        run_starts = np.r_[at[0], at[breaks + 1]]
+        run_ends = np.r_[at[breaks], at[-1]]
+        for a, b in zip(run_starts, run_ends):
+            m = int(b - a + 1)
+            if m < min_run:
+                continue
+            k = max(2, m // 4)
+            drops = []
+            if a >= 2:
+                drops.append(abs(value - x[a - min(k, a)]))
+            if b + 2 < n:
+                drops.append(abs(value - x[b + min(k, n - 1 - b)]))
+            if not drops:  # stuck at a non-zero value over the whole record
+                return m, value
+            if lsb is None:
+                steps = np.diff(np.unique(x))
+                lsb = float(np.min(steps)) if steps.size else math.inf
+            if min(drops) > (4 + 96 / (m - 2) ** 2) * lsb:
+                return m, value
+    return None
+
+
+# -------------------------------------------------------------- iteration
+
+
+def iter_hits(
+    run: Run, settings: HitSettings | None = None, *, chunk_samples: int = CHUNK_SAMPLES
+) -> Iterator[Hit]:
+    """The hits of a run, accepted and rejected, in order (bounded memory).
+
+    Parameters
+    ----------
+    run : Run
+        From :func:`guidefit.recording.read_recording`.
+    settings : HitSettings, optional
+    chunk_samples : int
+        Force samples read per step when scanning a ``signals`` run.
+
+    Yields
+    ------
+    Hit
+        All records of a run have the same length. A ``signals`` run without
+        any trigger yields nothing.
+
+    Raises
+    ------
+    HitSettingsError
+        A setting that does not fit the run (e.g. a record longer than the
+        stored hits).
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> import numpy as np
+    >>> from guidefit.recording import RunData, read_recording, write_recording
+    >>> fs = 200_000.0
+    >>> t = np.arange(4000) / fs
+    >>> force = np.where(t < 1e-4, 100 * np.sin(np.pi * t / 1e-4), 0.0)
+    >>> acc = np.exp(-t / 2e-3) * np.sin(2 * np.pi * 3450 * t)
+    >>> signals = np.zeros((20_000, 2))
+    >>> for start in (1_000, 9_000, 15_000):
+    ...     signals[start:start + 4000] += np.column_stack([force, acc])
+    >>> run = RunData("vertical", fs, [0, -1, 0], ["force", "acc_A_y"], ["N", "m/s^2"],
+    ...               [[0, 0, 0], [0.03, 0, 0.045]], [[0, -1, 0], [0, 1, 0]], data=signals)
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     write_recording(os.path.join(folder, "rec.h5"), run)
+    ...     hits = list(iter_hits(read_recording(os.path.join(folder, "rec.h5")).runs[0]))
+    >>> [(h.index, h.accepted, h.start_sample, h.data.shape) for h in hits]
+    [(0, True, 801, (5199, 2)), (1, True, 8801, (5199, 2)), (2, True, 14801, (5199, 2))]
+
+    The triggers are at samples 1001, 9001 and 15001 (5 % of the 100 N peak);
+    records start 1 ms (200 samples) earlier and are as long as fits before
+    the end of the signal.
+    """
+    settings = HitSettings() if settings is None else settings
+    if not isinstance(settings, HitSettings):
+        raise TypeError(f"settings: expected HitSettings, got {type(settings).__name__}")
+    if not isinstance(chunk_samples, (int, np.integer)) or chunk_samples < 2:
+        raise ValueError(f"chunk_samples={chunk_samples!r}: expected an integer >= 2")
+    fs = run.sample_rate_hz
+    if run.layout == "hits":
+        length = run.n_samples
+        if settings.record_length_s is not None:
+            length = round(settings.record_length_s * fs)
+            if not 2 <= length <= run.n_samples:
+                raise HitSettingsError(
+                    f"run '{run.name}': record_length_s {settings.record_length_s:g} s is {length} samples; "
+                    f"the stored hits have {run.n_samples}"
+                )
+        return _stored_hits(run, settings, length)
+    if (
+        settings.record_length_s is not None
+        and settings.pretrigger_s is not None
+        and settings.pretrigger_s >= settings.record_length_s
+    ):
+        raise HitSettingsError(
+            f"HitSettings: pretrigger_s ({settings.pretrigger_s:g}) must be shorter than "
+            f"record_length_s ({settings.record_length_s:g})"
+        )
+    return _signal_hits(run, settings, int(chunk_samples))
+
+
+def _stored_hits(run: Run, s: HitSettings, length: int) -> Iterator[Hit]:
+    fi = run.force_index
+    pre = run.pretrigger_samples
+    peaks = []
+    for i in range(run.n_hits_stored):
+        force = read_hit(run, i, [fi])[:length, 0]
+        finite = np.isfinite(force)
+        quiet = finite[: pre - 2] if pre is not None and pre >= 16 else finite
+        base = force[: quiet.size][quiet]
+        if base.size:
+            peaks.append(abs(_signed_extreme(force[finite] - np.median(base))))
+    median_peak = float(np.median(peaks)) if peaks else None
+    for i in range(run.n_hits_stored):
+        data = read_hit(run, i)[:length]
+        yield _check(run, data, s, i, 0, pre, median_peak)
+
+
+def _force_stats(run: Run, chunk: int) -> tuple[float, float, float]:
+    """(mean, max, min) of the finite force samples, streamed."""
+    total, count = 0.0, 0
+    hi, lo = -math.inf, math.inf
+    for start in range(0, run.n_samples, chunk):
+        f = read_block(run, start, min(run.n_samples, start + chunk), [run.force_index])[:, 0]
+        f = f[np.isfinite(f)]
+        if f.size:
+            total += float(np.sum(f))
+            count += f.size
+            hi, lo = max(hi, float(f.max())), min(lo, float(f.min()))
+    if count == 0:
+        return math.nan, math.nan, math.nan
+    return total / count, hi, lo
+
+
+def _find_triggers(run: Run, level: float, offset: float, holdoff: int, chunk: int):
+    """Trigger samples and the signed peak of ``f - offset`` in each hold-off window."""
+    triggers: list[int] = []
+    peaks: list[float] = []
+    windows: list[list] = []  # [index into triggers, end sample, hi, lo]
+    previous_above = False
+    next_allowed = 0
+    n = run.n_samples
+    for start in range(0, n, chunk):
+        stop = min(n, start + chunk)
+        x = read_block(run, start, stop, [run.force_index])[:, 0] - offset
+        with np.errstate(invalid="ignore"):
+            above = np.abs(x) >= level
+        before = np.empty_like(above)
+        before[0] = previous_above
+        before[1:] = above[:-1]
+        previous_above = bool(above[-1])
+        for r in np.flatnonzero(above & ~before) + start:
+            if r >= next_allowed:
+                triggers.append(int(r))
+                peaks.append(math.nan)
+                windows.append([len(triggers) - 1, int(r) + holdoff, -math.inf, math.inf])
+                next_allowed = int(r) + holdoff
+        still_open = []
+        for w in windows:
+            k, end = w[0], w[1]
+            a = max(triggers[k], start) - start
+            b = min(end, stop) - start
+            if b > a:
+                seg = x[a:b]
+                seg = seg[np.isfinite(seg)]
+                if seg.size:
+                    w[2], w[3] = max(w[2], float(seg.max())), min(w[3], float(seg.min()))
+            if end <= stop:
+                peaks[k] = w[2] if w[2] >= -w[3] else w[3]
+            else:
+                still_open.append(w)
+        windows = still_open
+    for w in windows:
+        peaks[w[0]] = w[2] if w[2] >= -w[3] else w[3]
+    return triggers, peaks
+
+
+def _signal_hits(run: Run, s: HitSettings, chunk: int) -> Iterator[Hit]:
+    fs = run.sample_rate_hz
+    n = run.n_samples
+    offset, hi, lo = _force_stats(run, chunk)
+    if not math.isfinite(offset):
+        return
+    level = (
+        s.trigger_level_n
+        if s.trigger_level_n is not None
+        else s.trigger_fraction * max(hi - offset, offset - lo)
+    )
+    if not level > 0:
+        return
+    holdoff = max(1, round(s.holdoff_s * fs))
+    triggers, peaks = _find_triggers(run, level, offset, holdoff, chunk)
+    if not triggers:
+        return
+    if s.pretrigger_s is not None:
+        pre = round(s.pretrigger_s * fs)
+    elif run.pretrigger_samples is not None:
+        pre = run.pretrigger_samples
+    else:
+        pre = max(1, min(round(DEFAULT_PRETRIGGER_S * fs), triggers[0]))
+    if s.record_length_s is not None:
+        length = round(s.record_length_s * fs)
+    else:
+        length = round(s.max_record_length_s * fs)
+        gaps = np.diff(triggers)
+        if gaps.size:
+            regular = gaps[gaps >= 0.5 * np.median(gaps)]
+            length = min(length, int(regular.min()))
+        available = n - (triggers[-1] - pre)
+        if length / 2 <= available < length:
+            length = available
+    length = max(length, pre + 1)
+    finite_peaks = [abs(p) for p in peaks if math.isfinite(p)]
+    median_peak = float(np.median(finite_peaks)) if finite_peaks else None
+    for k, trigger in enumerate(triggers):
+        start = trigger - pre
+        stop = start + length
+        reason = code = None
+        if start < 0:
+            code = "incomplete"
+            reason = f"incomplete: the record would start {-start} samples before the signal (pretrigger {pre})"
+        elif stop > n:
+            code = "incomplete"
+            reason = f"incomplete: the record would end {stop - n} samples after the signal ({length} needed)"
+        elif k > 0 and trigger - triggers[k - 1] < length:
+            code = "overlap"
+            gap_ms = (trigger - triggers[k - 1]) / fs * 1e3
+            reason = (
+                f"overlap: hit {k - 1} came only {gap_ms:.3g} ms earlier, inside this record "
+                f"({length / fs * 1e3:.3g} ms)"
+            )
+        if code:
+            yield Hit(
+                run.name,
+                k,
+                start,
+                None,
+                peaks[k],
+                False,
+                reason,
+                pre,
+                (code,),
+                dict.fromkeys(_METRICS, math.nan),
+            )
+            continue
+        data = read_block(run, start, stop)
+        yield _check(run, data, s, k, start, pre, median_peak)

@@ -1,0 +1,521 @@
+"""Tests of guidefit.hits: hit detection and per-hit quality checks.
+
+Every signal is synthetic and built here: half-sine force pulses at 200 kHz,
+decaying sinusoid responses, a 16-bit ADC (force range +/-2048 N, acceleration
+range +/-1024 m/s^2). The expected outcome of each case follows from how the
+signal was built (which hit got a second pulse, which one was clipped).
+"""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import guidefit.hits as hits_module
+from guidefit.hits import (
+    REJECTION_CODES,
+    HitSettings,
+    HitSettingsError,
+    check_hit,
+    iter_hits,
+    summarise_hits,
+)
+from guidefit.recording import RunData, read_recording, write_recording
+
+FS = 200_000.0
+FORCE_RANGE = 2048.0
+ACC_RANGE = 1024.0
+NAMES = ["force", "acc_A_y", "acc_B_y"]
+REAL_DATA = Path(__file__).resolve().parents[2] / "shared" / "real-data" / "pyfrf-impact"
+
+
+def half_sine(n, start, peak, width_s=1e-4):
+    """Half-sine force pulse of ``width_s`` starting at sample ``start``."""
+    t = (np.arange(n) - start) / FS
+    return np.where(
+        (t >= 0) & (t <= width_s), peak * np.sin(np.pi * np.clip(t, 0, width_s) / width_s), 0.0
+    )
+
+
+def ringing(n, start, amplitude, f_hz=3450.0, zeta=0.03):
+    """Decaying sinusoid starting at sample ``start``."""
+    t = (np.arange(n) - start) / FS
+    w = 2 * np.pi * f_hz
+    return np.where(
+        t >= 0, amplitude * np.exp(-zeta * w * t) * np.sin(w * np.sqrt(1 - zeta**2) * t), 0.0
+    )
+
+
+def adc(x, full_scale, bits=16):
+    """Quantise to a ``bits`` ADC of +/-``full_scale``, clipping at the rails."""
+    lsb = full_scale / 2 ** (bits - 1)
+    return np.clip(np.round(x / lsb), -(2 ** (bits - 1)), 2 ** (bits - 1) - 1) * lsb
+
+
+def record(
+    n=10_000,
+    start=200,
+    peak=300.0,
+    width_s=1e-4,
+    acc=(40.0, 25.0),
+    f_hz=3450.0,
+    zeta=0.03,
+    seed=0,
+    noise_lsb=0.5,
+    quantise=True,
+):
+    """One hit record (n, 3): force, acc_A_y, acc_B_y."""
+    rng = np.random.default_rng(seed)
+    force = half_sine(n, start, peak, width_s)
+    cols = [force] + [ringing(n, start, a, f_hz, zeta) for a in acc]
+    out = []
+    for col, full_scale in zip(cols, (FORCE_RANGE, ACC_RANGE, ACC_RANGE)):
+        lsb = full_scale / 2**15
+        col = col + noise_lsb * lsb * rng.standard_normal(n)
+        out.append(adc(col, full_scale) if quantise else col)
+    return np.column_stack(out)
+
+
+def hits_run(tmp_path, records, pretrigger=200, name="rec.h5", direction=(0.0, -1.0, 0.0)):
+    data = np.stack(records)
+    run = RunData(
+        "vertical",
+        FS,
+        direction,
+        NAMES,
+        ["N", "m/s^2", "m/s^2"],
+        [[0, 0, 0], [0.03, 0, 0.045], [-0.03, 0, 0.045]],
+        [[0, -1, 0], [0, 1, 0], [0, 1, 0]],
+        data=data,
+        pretrigger_samples=pretrigger,
+    )
+    write_recording(tmp_path / name, run)
+    return read_recording(tmp_path / name).runs[0]
+
+
+def signals_run(tmp_path, signal, name="sig.h5"):
+    run = RunData(
+        "vertical",
+        FS,
+        [0.0, -1.0, 0.0],
+        NAMES,
+        ["N", "m/s^2", "m/s^2"],
+        [[0, 0, 0], [0.03, 0, 0.045], [-0.03, 0, 0.045]],
+        [[0, -1, 0], [0, 1, 0], [0, 1, 0]],
+        data=signal,
+    )
+    write_recording(tmp_path / name, run)
+    return read_recording(tmp_path / name).runs[0]
+
+
+def longest_flat_top(x):
+    """Longest run of samples equal to max(x) (to check a fixture means what it says)."""
+    at = np.flatnonzero(x == x.max())
+    runs = np.split(at, np.flatnonzero(np.diff(at) > 1) + 1)
+    return max(len(r) for r in runs)
+
+
+def only(run, settings=None):
+    (hit,) = list(iter_hits(run, settings))
+    return hit
+
+
+# ----------------------------------------------------------------- stored hits
+
+
+def test_clean_quantised_hits_are_accepted(tmp_path):
+    run = hits_run(tmp_path, [record(peak=p, seed=k) for k, p in enumerate((250.0, 300.0, 350.0))])
+    got = list(iter_hits(run))
+    assert [h.index for h in got] == [0, 1, 2]
+    assert all(h.accepted and h.reason is None and h.codes == () for h in got), [
+        h.reason for h in got
+    ]
+    for hit, peak in zip(got, (250.0, 300.0, 350.0)):
+        assert hit.peak_force_n == pytest.approx(peak, abs=0.2)
+        assert hit.data.shape == (10_000, 3) and hit.data.dtype == np.float64
+        assert not hit.data.flags.writeable
+        assert hit.pretrigger_samples == 200 and hit.start_sample == 0
+        assert hit.metrics["pulse_width_s"] == pytest.approx(1e-4, abs=1e-5)
+        assert hit.metrics["second_impact_ratio"] == 0.0
+        assert hit.metrics["end_ratio"] < 0.01
+
+
+@pytest.mark.parametrize(
+    ("ratio", "gap_s", "double"),
+    [
+        (0.15, 0.5e-3, True),  # 15 % of the peak, 0.5 ms after the first pulse ends
+        (0.12, 0.1e-3, True),  # soon after
+        (0.40, 20e-3, True),  # late in the record
+        (0.08, 0.5e-3, False),  # below the 10 % limit
+    ],
+)
+def test_double_hit_after_the_pulse(tmp_path, ratio, gap_s, double):
+    first = record(peak=300.0)
+    second_start = 200 + 20 + round(gap_s * FS)  # the first pulse lasts 20 samples
+    first[:, 0] += adc(half_sine(10_000, second_start, ratio * 300.0), FORCE_RANGE)
+    hit = only(hits_run(tmp_path, [first]))
+    assert hit.accepted is not double
+    if double:
+        assert hit.codes == ("double_hit",) and hit.data is None
+        assert hit.reason.startswith(f"double_hit: second impact of {ratio:.0%} of the peak")
+        assert "after it" in hit.reason
+        assert hit.metrics["second_impact_ratio"] == pytest.approx(ratio, abs=0.01)
+    else:
+        assert hit.metrics["second_impact_ratio"] == 0.0
+
+
+def test_double_hit_with_the_larger_impact_second(tmp_path):
+    rec = record(peak=60.0)
+    rec[:, 0] += adc(half_sine(10_000, 400, 300.0), FORCE_RANGE)
+    hit = only(hits_run(tmp_path, [rec]))
+    assert hit.codes == ("double_hit",)
+    assert "20% of the peak" in hit.reason and "before it" in hit.reason
+
+
+def test_double_hit_merged_into_one_pulse(tmp_path):
+    rec = record(peak=300.0)
+    # starts 2 samples before the first ends: the force never falls below 5 %
+    rec[:, 0] += adc(half_sine(10_000, 218, 150.0), FORCE_RANGE)
+    hit = only(hits_run(tmp_path, [rec]))
+    assert hit.codes == ("double_hit",)
+    assert "two peaks within one pulse" in hit.reason
+
+
+def test_smooth_quantised_peaks_with_repeated_top_codes_are_not_clipping(tmp_path):
+    # A soft-tip pulse (1 ms) and slow, small responses: their 16-bit tops repeat
+    # the same code several times, which is not an overload.
+    rec = record(peak=40.0, width_s=1e-3, acc=(5.0, 2.0), f_hz=1075.0, zeta=0.02, noise_lsb=0.0)
+    for column in range(3):
+        assert longest_flat_top(rec[:, column]) >= 3, column  # the fixture has flat tops
+    hit = only(hits_run(tmp_path, [rec]))
+    assert hit.accepted, hit.reason
+
+
+def test_smooth_peaks_with_noise_across_many_seeds_are_not_clipping(tmp_path):
+    records = [
+        record(peak=p, width_s=w, acc=(a, a / 3), f_hz=f, zeta=0.03, noise_lsb=nl, seed=seed)
+        for seed, (p, w, a, f, nl) in enumerate(
+            [
+                (40, 1e-3, 5, 1075, 1.0),
+                (80, 5e-4, 2, 1075, 2.0),
+                (20, 2e-3, 1, 900, 0.5),
+                (1500, 1e-4, 800, 3450, 1.0),
+            ]
+        )
+    ]
+    got = list(iter_hits(hits_run(tmp_path, records), HitSettings(min_peak_fraction=0.0)))
+    assert [h.reason for h in got] == [None] * 4
+
+
+def test_clipping_criterion_on_many_simulated_oscillations():
+    """No unclipped quantised oscillation is flagged; clipped ones (5 %+ over) are.
+
+    Decaying cosines of 3-20 000 samples per period and 3-30 000 LSB, with
+    0-5 LSB of noise, through a 12- or 16-bit ADC (the study behind the limit,
+    at a tenth of its size).
+    """
+    rng = np.random.default_rng(11)
+    false_alarms = missed = clipped_total = 0
+    t0 = np.arange(2000.0)
+    for _ in range(1500):
+        w = 2 * np.pi / 10 ** rng.uniform(0.5, 4.3)
+        noise = rng.choice([0.0, rng.uniform(0, 5)]) * rng.standard_normal(t0.size)
+        t = t0 - rng.uniform(0, 2000)
+        envelope = np.cos(w * t) * np.exp(-np.abs(t) / rng.uniform(50, 5000))
+        smooth = 10 ** rng.uniform(0.5, 4.5) * envelope + noise
+        if np.abs(smooth).max() < 32767:
+            false_alarms += hits_module._flat_top(np.round(smooth) * 0.0625, 3) is not None
+        rail = rng.choice([32767, 2047])
+        x = rail * (1 + 10 ** rng.uniform(np.log10(0.05), 0.7)) * envelope + noise
+        q = np.clip(np.round(x), -rail - 1, rail)
+        if np.abs(x).max() >= 1.05 * rail and max(longest_flat_top(q), longest_flat_top(-q)) >= 3:
+            clipped_total += 1
+            missed += hits_module._flat_top(q * 0.0625, 3) is None
+    assert false_alarms == 0
+    assert clipped_total > 500 and missed <= 0.01 * clipped_total, (missed, clipped_total)
+
+
+def test_clipped_force_pulse(tmp_path):
+    rec = record(peak=3000.0)  # beyond the 2048 N range
+    assert longest_flat_top(rec[:, 0]) >= 3
+    hit = only(hits_run(tmp_path, [rec]))
+    assert hit.codes == ("clipped",)
+    assert hit.reason.startswith("clipped: force (")
+    assert "at 2047.94 N" in hit.reason
+
+
+def test_clipped_response_names_the_channel(tmp_path):
+    rec = record(acc=(40.0, 1300.0))  # acc_B_y beyond +/-1024 m/s^2
+    hit = only(hits_run(tmp_path, [rec]))
+    assert hit.codes == ("clipped",)
+    assert "acc_B_y" in hit.reason and "acc_A_y" not in hit.reason and "m/s^2" in hit.reason
+
+
+def test_clipped_unquantised_data(tmp_path):
+    rec = record(quantise=False, noise_lsb=0.0)
+    rec[:, 1] = np.clip(rec[:, 1], -30.0, 30.0)
+    hit = only(hits_run(tmp_path, [rec]))
+    assert hit.codes == ("clipped",) and "acc_A_y" in hit.reason
+
+
+def test_non_finite_samples(tmp_path):
+    rec = record()
+    rec[500, 2] = np.nan
+    rec[501, 2] = np.inf
+    hit = only(hits_run(tmp_path, [rec]))
+    assert hit.codes == ("non_finite",) and not hit.accepted and hit.data is None
+    assert hit.reason == "non_finite: 2 NaN/Inf sample(s) in acc_B_y"
+    assert hit.peak_force_n == pytest.approx(300.0, abs=0.2)
+
+
+def test_too_weak_relative_and_absolute(tmp_path):
+    run = hits_run(
+        tmp_path, [record(peak=300.0), record(peak=10.0, acc=(1.3, 0.8)), record(peak=320.0)]
+    )
+    got = list(iter_hits(run))
+    assert [h.accepted for h in got] == [True, False, True]
+    assert got[1].codes == ("too_weak",)
+    assert "5% of the run's median peak 300 N" in got[1].reason
+    strict = list(iter_hits(run, HitSettings(min_peak_force_n=310.0)))
+    assert [h.accepted for h in strict] == [False, False, True]
+    assert "below 310 N (the minimum)" in strict[0].reason
+
+
+def test_response_that_has_not_decayed(tmp_path):
+    slow = record(zeta=0.0005)  # time constant 92 ms in a 50 ms record
+    hit = only(hits_run(tmp_path, [slow]))
+    assert hit.codes == ("not_decayed",)
+    assert "acc_A_y ends at" in hit.reason and "acc_B_y ends at" in hit.reason
+    assert hit.metrics["end_ratio"] > 0.5
+
+
+def test_noise_at_the_end_is_not_slow_decay(tmp_path):
+    rec = record(acc=(40.0, 0.2), noise_lsb=0.0)
+    rng = np.random.default_rng(5)
+    rec[:, 2] = adc(ringing(10_000, 200, 0.2) + 0.02 * rng.standard_normal(10_000), ACC_RANGE)
+    hit = only(hits_run(tmp_path, [rec]))
+    assert hit.metrics["end_ratio"] > 0.1  # the noise alone is 10 %+ of the peak ...
+    assert hit.accepted, hit.reason  # ... but it is noise, seen before the trigger too
+
+
+def test_negative_hit(tmp_path):
+    hit = only(hits_run(tmp_path, [-record()]))
+    assert hit.codes == ("negative",)
+    assert hit.peak_force_n == pytest.approx(-300.0, abs=0.2)
+    assert "against excitation_direction" in hit.reason
+
+
+def test_several_reasons_are_all_reported(tmp_path):
+    rec = record(peak=3000.0, zeta=0.0005)
+    rec[:, 0] += adc(half_sine(10_000, 2000, 600.0), FORCE_RANGE)
+    hit = only(hits_run(tmp_path, [rec]))
+    assert hit.codes == ("double_hit", "clipped", "not_decayed")
+    assert hit.reason.count("; ") == 2
+
+
+def test_every_rejection_code_is_documented():
+    assert set(REJECTION_CODES) == {
+        "non_finite",
+        "negative",
+        "too_weak",
+        "double_hit",
+        "clipped",
+        "not_decayed",
+        "incomplete",
+        "overlap",
+    }
+
+
+def test_stored_hits_without_pretrigger_attribute(tmp_path):
+    hit = only(hits_run(tmp_path, [record(start=37)], pretrigger=None))
+    assert hit.accepted and hit.pretrigger_samples == 38  # first sample >= 5 % of the peak
+
+
+def test_record_length_for_stored_hits(tmp_path):
+    run = hits_run(tmp_path, [record(), record(seed=1)])
+    short = list(iter_hits(run, HitSettings(record_length_s=0.01)))
+    assert [h.data.shape for h in short] == [(2000, 3), (2000, 3)]
+    with pytest.raises(HitSettingsError, match="the stored hits have 10000"):
+        iter_hits(run, HitSettings(record_length_s=0.1))
+
+
+def test_check_hit_directly_leaves_the_input_alone(tmp_path):
+    run = hits_run(tmp_path, [record()])
+    data = record(seed=3)
+    hit = check_hit(run, data, pretrigger_samples=200, index=7)
+    assert hit.accepted and hit.index == 7
+    data[0, 0] = 1.0  # still writable, and the hit holds its own copy
+    assert hit.data[0, 0] != 1.0
+    with pytest.raises(ValueError, match=r"expected \(n_samples, 3\)"):
+        check_hit(run, data[:, :2])
+
+
+# -------------------------------------------------------------------- signals
+
+STARTS = (2_000, 17_000, 35_000, 50_000)
+
+
+def signal_with(starts=STARTS, n=60_000, peaks=None, seed=0):
+    rng = np.random.default_rng(seed)
+    peaks = peaks or [300.0 + 20 * k for k in range(len(starts))]
+    force = sum(half_sine(n, s, p) for s, p in zip(starts, peaks))
+    acc = [sum(ringing(n, s, a * p / 300.0) for s, p in zip(starts, peaks)) for a in (40.0, 25.0)]
+    cols = [force, *acc]
+    return np.column_stack(
+        [
+            adc(c + 0.5 * fs_ / 2**15 * rng.standard_normal(n), fs_)
+            for c, fs_ in zip(cols, (FORCE_RANGE, ACC_RANGE, ACC_RANGE))
+        ]
+    )
+
+
+def test_signals_triggers_and_common_record_length(tmp_path):
+    run = signals_run(tmp_path, signal_with())
+    got = list(iter_hits(run))
+    assert [h.accepted for h in got] == [True] * 4, [h.reason for h in got]
+    triggers = [s + 1 for s in STARTS]  # first sample above 5 % of the largest peak
+    assert [h.start_sample for h in got] == [t - 200 for t in triggers]
+    # shortest spacing 15 000 samples, shortened so the last hit fits: 60 000 - 49 801
+    assert {h.data.shape for h in got} == {(10_199, 3)}
+    assert all(h.pretrigger_samples == 200 for h in got)
+    np.testing.assert_array_equal(
+        got[2].data, run.read_block(got[2].start_sample, got[2].start_sample + 10_199)
+    )
+    assert [round(h.peak_force_n) for h in got] == [300, 320, 340, 360]
+
+
+def test_signals_chunking_does_not_change_the_hits(tmp_path, monkeypatch):
+    run = signals_run(tmp_path, signal_with())
+    rows_read = []
+    real_read_block = hits_module.read_block
+
+    def spy(run_, start, stop, channels=None):
+        rows_read.append(stop - start)
+        return real_read_block(run_, start, stop, channels)
+
+    monkeypatch.setattr(hits_module, "read_block", spy)
+    small = list(iter_hits(run, chunk_samples=777))  # triggers straddle chunk boundaries
+    assert max(rows_read) <= 10_199  # never the whole 60 000-sample signal
+    large = list(iter_hits(run, chunk_samples=1_000_000))
+    assert [h.start_sample for h in small] == [h.start_sample for h in large]
+    assert [h.peak_force_n for h in small] == [h.peak_force_n for h in large]
+    for a, b in zip(small, large):
+        np.testing.assert_array_equal(a.data, b.data)
+
+
+def test_signals_double_hit_and_overlap(tmp_path):
+    starts = (2_000, 17_000, 18_600, 35_000, 50_000)  # an impact 8 ms after the second hit
+    run = signals_run(tmp_path, signal_with(starts, peaks=[300, 320, 120, 340, 360]))
+    got = list(iter_hits(run))
+    assert [h.index for h in got] == [0, 1, 2, 3, 4]
+    assert [h.codes for h in got] == [(), ("double_hit",), ("overlap",), (), ()]
+    assert "hit 1 came only 8 ms earlier" in got[2].reason
+    assert got[2].data is None and got[2].peak_force_n == pytest.approx(120, abs=1)
+    assert {h.data.shape for h in got if h.accepted} == {(10_199, 3)}  # spacings >= 15 000
+
+
+def test_signals_first_hit_early_and_last_hit_late(tmp_path):
+    starts = (60, 17_000, 35_000, 52_000)
+    run = signals_run(tmp_path, signal_with(starts))
+    got = list(iter_hits(run))
+    assert got[0].accepted and got[0].pretrigger_samples == 61 and got[0].start_sample == 0
+    # a fixed pretrigger does not fit before the first hit; a fixed length not after the last
+    fixed = list(iter_hits(run, HitSettings(pretrigger_s=1e-3, record_length_s=0.05)))
+    assert [h.codes for h in fixed] == [("incomplete",), (), (), ("incomplete",)]
+    assert "start 139 samples before the signal" in fixed[0].reason
+    assert "end 1801 samples after the signal" in fixed[3].reason
+
+
+def test_signals_absolute_trigger_level_and_no_hits(tmp_path):
+    run = signals_run(tmp_path, signal_with())
+    got = list(iter_hits(run, HitSettings(trigger_level_n=330.0)))
+    # 340 sin(pi k / 20) >= 330 from k = 9; 360 sin(pi k / 20) >= 330 from k = 8
+    assert [h.start_sample + 200 for h in got] == [35_000 + 9, 50_000 + 8]
+    assert [h.accepted for h in got] == [True, True]
+    quiet = signals_run(tmp_path, np.zeros((5_000, 3)), name="quiet.h5")
+    assert list(iter_hits(quiet)) == []
+
+
+def test_signals_weak_hit_by_absolute_minimum(tmp_path):
+    run = signals_run(tmp_path, signal_with(peaks=[300, 60, 320, 340]))
+    got = list(iter_hits(run, HitSettings(min_peak_force_n=100.0)))
+    assert [h.codes for h in got] == [(), ("too_weak",), (), ()]
+
+
+# -------------------------------------------------------------- settings, table
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"trigger_fraction": 0.0}, "trigger_fraction is 0.0; expected a number in (0, 1)"),
+        ({"trigger_level_n": -1.0}, "trigger_level_n is -1.0; expected a positive number"),
+        ({"holdoff_s": float("nan")}, "holdoff_s is nan"),
+        ({"pretrigger_s": -0.1}, "pretrigger_s is -0.1; expected a number >= 0"),
+        ({"clip_min_run": 2}, "clip_min_run is 2; expected an integer >= 3"),
+        (
+            {"double_hit_ratio": 0.04},
+            "pulse_end_fraction (0.05) must be below double_hit_ratio (0.04)",
+        ),
+        ({"max_end_ratio": True}, "max_end_ratio is True"),
+    ],
+)
+def test_settings_validation(kwargs, message):
+    with pytest.raises(HitSettingsError) as info:
+        HitSettings(**kwargs)
+    assert message in str(info.value)
+    assert isinstance(info.value, ValueError) and info.value.exit_code == 2
+
+
+def test_pretrigger_longer_than_record_is_refused(tmp_path):
+    run = signals_run(tmp_path, signal_with())
+    with pytest.raises(HitSettingsError, match="pretrigger_s"):
+        iter_hits(run, HitSettings(pretrigger_s=0.02, record_length_s=0.01))
+
+
+def test_summarise_hits_table(tmp_path):
+    run = hits_run(tmp_path, [record(), -record(seed=1)])
+    table = summarise_hits(iter_hits(run))
+    assert list(table.columns) == [
+        "run",
+        "index",
+        "start_sample",
+        "pretrigger_samples",
+        "peak_force_n",
+        "accepted",
+        "codes",
+        "reason",
+        "pulse_width_s",
+        "second_impact_ratio",
+        "end_ratio",
+    ]
+    assert table["accepted"].tolist() == [True, False]
+    assert table["codes"].tolist() == ["", "negative"]
+    assert summarise_hits([]).empty
+
+
+# ------------------------------------------------------------------ real data
+
+
+@pytest.mark.skipif(not REAL_DATA.is_dir(), reason="shared/real-data not present")
+def test_real_pyfrf_hits_are_all_accepted(tmp_path):
+    """Five published hammer hits (pyFRF, MIT licence; see shared/real-data/README.md)."""
+    arrays = [np.load(REAL_DATA / f"measurements_{k}.npy") for k in range(1, 6)]
+    fs = 1.0 / np.median(np.diff(arrays[0][0]))
+    data = np.stack([np.column_stack([a[1], a[2]]) for a in arrays])
+    run = RunData(
+        "pyfrf",
+        fs,
+        [0, 0, 1],
+        ["force", "acc_A_z"],
+        ["N", "m/s^2"],
+        np.zeros((2, 3)),
+        [[0, 0, 1], [0, 0, 1]],
+        data=data,
+    )
+    write_recording(tmp_path / "pyfrf.h5", run)
+    got = list(iter_hits(read_recording(tmp_path / "pyfrf.h5").runs[0]))
+    assert [h.accepted for h in got] == [True] * 5, [h.reason for h in got]
+    peaks = [h.peak_force_n for h in got]
+    assert 65 < min(peaks) and max(peaks) < 90  # README: peaks 68-89 N
+    assert all(18 <= h.pretrigger_samples <= 22 for h in got)  # force starts about 22 samples in
