@@ -965,3 +965,12 @@ def test_default_channel_geometry():
     np.testing.assert_array_equal(pos, [[1, 2, 3]])
     with pytest.raises(RecordingError, match="point 'Q'"):
         default_channel_geometry(["acc_Q_x"], [1, 0, 0])
+
+
+def test_importing_reads_no_heavy_modules():
+    import subprocess
+    import sys
+
+    code = "import sys, guidefit.recording, guidefit.hits; print(sorted({'h5py', 'pandas', 'scipy'} & set(sys.modules)))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
