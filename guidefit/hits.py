@@ -48,6 +48,13 @@ order (the first two end the assessment; the others are all reported):
     more (with a flat top of 3 or more samples) do; ``tests/test_hits.py``
     repeats a smaller version. A channel stuck at one non-zero value over the
     whole record counts as clipped too.
+``dropout``
+    Every channel holds its value exactly for ``dropout_min_s`` (0.1 ms, at
+    least 8 samples) or longer, starting after the trigger and before the
+    responses have decayed below 10 % of their peaks: the data acquisition
+    lost a block of samples (they read as a constant, often 0). A live,
+    noisy signal never stands still in all channels at once; before the
+    trigger (e.g. noise-free simulated data) such blocks are normal.
 ``not_decayed``
     A response channel has not died out by the end of the record: the RMS of
     its last ``decay_end_fraction`` (5 %) of samples, times sqrt(2), exceeds
@@ -96,6 +103,7 @@ REJECTION_CODES = {
     "too_weak": "peak force below the minimum",
     "double_hit": "a second impact in the record",
     "clipped": "a channel is flat at its extreme (overload)",
+    "dropout": "every channel frozen for a block of samples while the response rings",
     "not_decayed": "a response has not died out by the end of the record",
     "incomplete": "the record would run outside the signal",
     "overlap": "the record overlaps the previous hit's record",
@@ -149,6 +157,9 @@ class HitSettings:
         Share of the record at its end over which the decay is judged (0.05).
     max_end_ratio : float
         Largest allowed end amplitude, as a fraction of the channel's peak (0.10).
+    dropout_min_s : float
+        Shortest block, s (at least 8 samples), in which every channel holding
+        its value exactly counts as a data dropout (0.1 ms).
 
     Examples
     --------
@@ -173,6 +184,7 @@ class HitSettings:
     clip_min_run: int = 3
     decay_end_fraction: float = 0.05
     max_end_ratio: float = 0.10
+    dropout_min_s: float = 1e-4
 
     def __post_init__(self):
         fractions = (
@@ -192,7 +204,13 @@ class HitSettings:
             raise HitSettingsError(
                 f"HitSettings: min_peak_fraction is {self.min_peak_fraction!r}; expected a number in [0, 1)"
             )
-        positive = ("trigger_level_n", "record_length_s", "max_record_length_s", "holdoff_s")
+        positive = (
+            "trigger_level_n",
+            "record_length_s",
+            "max_record_length_s",
+            "holdoff_s",
+            "dropout_min_s",
+        )
         for name in positive:
             value = getattr(self, name)
             if value is None and name in ("trigger_level_n", "record_length_s"):
@@ -457,6 +475,15 @@ def _assess(data, run: Run, s: HitSettings, pre: int | None, median_peak):
         codes.append("clipped")
         reasons.append(f"clipped: {', '.join(clipped)}")
 
+    dropout = _dropout(data, run.response_indices, quiet, pre, max(8, round(s.dropout_min_s * fs)))
+    if dropout is not None:
+        a, m = dropout
+        codes.append("dropout")
+        reasons.append(
+            f"dropout: every channel frozen for {m} samples ({m / fs * 1e3:.3g} ms) from sample {a}, "
+            "while the response is still ringing"
+        )
+
     n_end = max(8, math.ceil(s.decay_end_fraction * n))
     worst = 0.0
     slow = []
@@ -533,6 +560,34 @@ def _double_hit(
             f"two peaks within one pulse, {depth[j] / peak:.0%} of the peak deep dip between them"
         )
     return ""
+
+
+def _dropout(
+    data: np.ndarray, responses, quiet, trigger: int, min_len: int
+) -> tuple[int, int] | None:
+    """(first sample, length) of a block where every channel holds its value, or None.
+
+    Only blocks that start at or after the trigger and before the responses
+    have decayed below 10 % of their peaks count: there a live signal cannot
+    stand still in every channel at once.
+    """
+    still = np.all(data[1:] == data[:-1], axis=1)  # sample i + 1 equals sample i everywhere
+    if not still.any() or not responses:
+        return None
+    active_end = 0
+    for c in responses:
+        x = data[:, c] - (np.median(data[quiet, c]) if quiet else np.median(data[:, c]))
+        top = np.max(np.abs(x))
+        if top > 0:
+            active_end = max(active_end, int(np.flatnonzero(np.abs(x) >= 0.1 * top)[-1]))
+    edges = np.diff(np.r_[0, still.astype(np.int8), 0])
+    starts = np.flatnonzero(edges == 1)
+    ends = np.flatnonzero(edges == -1)  # exclusive, in steps: samples starts .. ends are equal
+    for a, b in zip(starts, ends):
+        length = int(b - a + 1)
+        if length >= min_len and trigger <= a < active_end:
+            return int(a), length
+    return None
 
 
 def _flat_top(x: np.ndarray, min_run: int) -> tuple[int, float] | None:

@@ -298,6 +298,24 @@ def test_noise_at_the_end_is_not_slow_decay(tmp_path):
     assert hit.accepted, hit.reason  # ... but it is noise, seen before the trigger too
 
 
+def test_dropout_of_every_channel(tmp_path):
+    rec = record()
+    rec[240:640, :] = 0.0  # the DAQ lost 2 ms of samples just after the impact
+    hit = only(hits_run(tmp_path, [rec]))
+    assert hit.codes == ("dropout",)
+    assert hit.reason.startswith(
+        "dropout: every channel frozen for 400 samples (2 ms) from sample 240"
+    )
+
+
+def test_noise_free_unquantised_record_is_accepted(tmp_path):
+    # flat zeros before the trigger and an exactly-zero force after the pulse are normal
+    rec = record(quantise=False, noise_lsb=0.0)
+    assert np.all(rec[:200] == 0.0)
+    hit = only(hits_run(tmp_path, [rec]))
+    assert hit.accepted, hit.reason
+
+
 def test_negative_hit(tmp_path):
     hit = only(hits_run(tmp_path, [-record()]))
     assert hit.codes == ("negative",)
@@ -320,6 +338,7 @@ def test_every_rejection_code_is_documented():
         "too_weak",
         "double_hit",
         "clipped",
+        "dropout",
         "not_decayed",
         "incomplete",
         "overlap",
@@ -458,6 +477,7 @@ def test_signals_weak_hit_by_absolute_minimum(tmp_path):
             "pulse_end_fraction (0.05) must be below double_hit_ratio (0.04)",
         ),
         ({"max_end_ratio": True}, "max_end_ratio is True"),
+        ({"dropout_min_s": 0.0}, "dropout_min_s is 0.0; expected a positive number"),
     ],
 )
 def test_settings_validation(kwargs, message):
