@@ -127,7 +127,8 @@ class HitSettings:
         Relative trigger level: this fraction of the run's largest
         ``|force - mean(force)|``, found in a first streaming pass (default 0.05).
     pretrigger_s : float, optional
-        Record start before the trigger. Default: the file's
+        Record start before the trigger (``signals`` layout; stored hits keep
+        their own). Default: the file's
         ``pretrigger_samples`` if given, else 1 ms, shortened to the first
         trigger's position if that comes earlier in the signal.
     record_length_s : float, optional

@@ -1440,20 +1440,21 @@ def _read_csv(p: Path, display: str) -> Recording:
     else:
         units = ["N" if name == "force" else "m/s^2" for name in names]
 
-    default_pos = default_dir = None
-    if "positions_m" not in meta or "directions" not in meta:
-        # names and units first, so their errors win over a missing default point
-        placeholder = np.tile([1.0, 0.0, 0.0], (n, 1))
-        _build_channels(display, tuple(names), tuple(units), placeholder, placeholder)
-        try:
-            default_pos, default_dir = default_channel_geometry(
-                names, exc_dir, exc_pos, guide=guide
-            )
-        except GuidefitError as exc:
-            raise RecordingError(f"{display}: {exc}") from None
+    # names and units first, so their errors win over a missing default point
+    placeholder = np.tile([1.0, 0.0, 0.0], (n, 1))
+    _build_channels(display, tuple(names), tuple(units), placeholder, placeholder)
     if "positions_m" in meta:
         positions = _csv_floats(*meta["positions_m"], display, "positions_m", 3 * n).reshape(n, 3)
+        known = {m.group(1): (0.0, 0.0, 0.0) for m in map(_ACC_RE.match, names) if m}
     else:
+        positions = known = None
+    try:  # `known` stands in for the guide's points when the positions are given
+        default_pos, default_dir = default_channel_geometry(
+            names, exc_dir, exc_pos, guide=guide, points=known
+        )
+    except GuidefitError as exc:
+        raise RecordingError(f"{display}: {exc}") from None
+    if positions is None:
         positions = default_pos
     if "directions" in meta:
         directions = _csv_floats(*meta["directions"], display, "directions", 3 * n).reshape(n, 3)

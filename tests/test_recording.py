@@ -974,3 +974,23 @@ def test_importing_reads_no_heavy_modules():
     code = "import sys, guidefit.recording, guidefit.hits; print(sorted({'h5py', 'pandas', 'scipy'} & set(sys.modules)))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
+
+
+def test_csv_with_a_guide_the_catalogue_does_not_know(tmp_path):
+    text = csv_with(
+        meta=["# guide: NOSUCH99", "# sample_rate_hz: 1000", "# excitation_direction: 0 -1 0"]
+    )
+    message = expect_error(write_text(tmp_path, text), "NOSUCH99")
+    assert "positions" in message or "guide" in message
+    # with positions given, the guide is not needed for reading
+    text = csv_with(
+        meta=[
+            "# guide: NOSUCH99",
+            "# sample_rate_hz: 1000",
+            "# excitation_direction: 0 -1 0",
+            "# positions_m: 0 0 0; 0.01 0.02 0.03",
+        ]
+    )
+    run = read_recording(write_text(tmp_path, text, "ok.csv")).runs[0]
+    np.testing.assert_array_equal(run.channels[1].position_m, [0.01, 0.02, 0.03])
+    np.testing.assert_array_equal(run.channels[1].direction, [0, 1, 0])
