@@ -954,9 +954,13 @@ def read_recording(path: str | os.PathLike) -> Recording:
     display = os.fspath(path)
     p = Path(display)
     suffix = p.suffix.lower()
+    if suffix in (".uff", ".unv"):  # UFF-58 time data, optional extra pyuff
+        from guidefit.uff import read_uff_recording
+
+        return read_uff_recording(path)
     if suffix not in _HDF5_SUFFIXES + _CSV_SUFFIXES:
         raise RecordingError(
-            f"{display}: unknown file type '{p.suffix}'; expected .h5, .hdf5 or .csv"
+            f"{display}: unknown file type '{p.suffix}'; expected .h5, .hdf5, .csv, .uff or .unv"
         )
     if not p.exists():
         raise RecordingError(f"{display}: no such file")
