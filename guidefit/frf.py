@@ -19,7 +19,7 @@ does not depend on a common scale. From them, per response channel:
   smallest eigenvalue :math:`\lambda` gives :math:`H_v = -v_1/v_2`; in closed form
   :math:`H_v = S_{fx}/(S_{ff} - \lambda)`,
   :math:`\lambda = \tfrac12 (S_{ff}+S_{xx}) - \sqrt{\tfrac14 (S_{ff}-S_{xx})^2 + |S_{fx}|^2}`
-  (Shin and Hammond [1]_, Sec. 9.2). It assumes equal noise power on force and
+  (Shin and Hammond [1]_). It assumes equal noise power on force and
   response *in their own units*, so unlike H1 and H2 it is not invariant to a
   rescaling of one channel when noise is present.
 - ordinary coherence :math:`\gamma^2 = |S_{fx}|^2/(S_{ff} S_{xx}) \in [0, 1]`
@@ -70,9 +70,10 @@ consumed from an iterator a few at a time and never all held.
 References
 ----------
 .. [1] K. Shin and J. K. Hammond, *Fundamentals of Signal Processing for Sound
-   and Vibration Engineers*, Wiley, 2008, Sec. 9.2 (H1, H2, Hv).
+   and Vibration Engineers*, Wiley, 2008, Ch. 9 (the H1, H2 and Hv estimators).
 .. [2] J. S. Bendat and A. G. Piersol, *Random Data: Analysis and Measurement
-   Procedures*, 4th ed., Wiley, 2010, Table 9.6 (random error of a gain factor).
+   Procedures*, 4th ed., Wiley, 2010, Ch. 9 (random error of gain-factor
+   estimates).
 .. [3] M. A. Busing, E. Meijer and R. van der Leeden, "Delete-m jackknife for
    unequal m", *Statistics and Computing* 9 (1999) 3-8.
 
@@ -676,10 +677,10 @@ class _Accumulator:
     def group_sums(self) -> dict:
         g = min(self.n_groups, self.n_hits)     # groups beyond n_hits never got a hit
         return {
-            "Sff": self.sff[:g],
-            "Sxx": self.sxx[:g].transpose(0, 2, 1),
-            "Sfx": self.sfx[:g].transpose(0, 2, 1),
-            "n_hits": self.counts[:g].copy(),
+            "Sff": _readonly(self.sff[:g]),
+            "Sxx": _readonly(self.sxx[:g].transpose(0, 2, 1)),
+            "Sfx": _readonly(self.sfx[:g].transpose(0, 2, 1)),
+            "n_hits": _readonly(self.counts[:g].copy()),
         }
 
 
