@@ -943,8 +943,17 @@ class FrfSet:
 
     @property
     def n_groups(self) -> int:
-        """Number of jackknife groups G."""
+        """Number of jackknife groups G (0 when the group sums were not kept)."""
+        if not self.group_sums:
+            return 0
         return int(np.asarray(self.group_sums["Sff"]).shape[0])
+
+    def _need_groups(self, what: str, minimum: int) -> None:
+        if self.n_groups < minimum:
+            raise ValueError(
+                f"run '{self.run}': {what} needs group sums of >= {minimum} groups, "
+                f"this FrfSet has {self.n_groups}"
+            )
 
     @property
     def H_std(self) -> np.ndarray:
@@ -973,6 +982,7 @@ class FrfSet:
         >>> bool(np.all(np.abs(h1.H) <= np.abs(h2.H) + 1e-12))
         True
         """
+        self._need_groups("with_estimator", 1)
         return _frfset_from_sums(self, self.group_sums, estimator)
 
     def leave_one_group_out(self) -> Iterator[FrfSet]:
@@ -989,6 +999,7 @@ class FrfSet:
         >>> [r.n_averages for r in frf.leave_one_group_out()]
         [3, 3, 4]
         """
+        self._need_groups("leave_one_group_out", 2)
         gs = self.group_sums
         tot = {k: np.sum(gs[k], axis=0) for k in ("Sff", "Sxx", "Sfx", "n_hits")}
         for g in range(self.n_groups):
@@ -1169,8 +1180,10 @@ def _frf(items, sample_rate_hz, force_index, channel_names, estimator, window,
     fs = float(sample_rate_hz)
     if not (fs > 0 and math.isfinite(fs)):
         raise ValueError(f"run '{run}': sample_rate_hz must be a positive number, got {fs!r}")
+    if window is None:
+        window = WindowSettings()
     if not isinstance(window, WindowSettings):
-        raise TypeError(f"window must be a WindowSettings, got {type(window).__name__}")
+        raise TypeError(f"window must be a WindowSettings or None, got {type(window).__name__}")
     if channel_names is not None and n_channels is None:
         n_channels = len(channel_names)
     fi = int(force_index)
@@ -1275,6 +1288,7 @@ def jackknife_frf(frfset: FrfSet, fn: Callable[[FrfSet], object]) -> JackknifeRe
     >>> jk.pseudovalues.shape, bool(0 < jk.std < 0.2), bool(abs(jk.value - 2) < 0.2)
     ((8,), True, True)
     """
+    frfset._need_groups("jackknife_frf", 1)
     theta = np.asarray(fn(frfset), dtype=float)
     m = np.asarray(frfset.group_sums["n_hits"], dtype=float)
     G = m.size

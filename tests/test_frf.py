@@ -457,6 +457,21 @@ def test_fewer_hits_than_groups():
     assert one.n_groups == 1 and np.allclose(one.coherence, 1.0)
     jk = jackknife_frf(one, lambda s: np.abs(s.H[3, 0]))
     assert np.isnan(jk.std)
+    with pytest.raises(ValueError, match="leave_one_group_out needs group sums of >= 2 groups"):
+        list(one.leave_one_group_out())
+
+
+def test_frfset_without_group_sums_says_so(tmp_path):
+    pytest.importorskip("h5py")
+    rec, _ = random_records(9, 3, 32, 1, 0.2)
+    frf = frf_from_records(rec, 1.0, window=None, run="v")        # None: default windows
+    write_frf_h5(tmp_path / "f.h5", frf, include_group_sums=False)
+    (back,) = read_frf_h5(tmp_path / "f.h5")
+    assert back.n_groups == 0 and np.array_equal(back.H, frf.H)
+    with pytest.raises(ValueError, match="run 'v': jackknife_frf needs group sums"):
+        jackknife_frf(back, lambda s: 0.0)
+    with pytest.raises(ValueError, match="with_estimator needs group sums"):
+        back.with_estimator("H2")
 
 
 def test_leave_one_group_out_equals_recomputing_without_the_group():
