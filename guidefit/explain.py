@@ -556,8 +556,12 @@ def _roller_modal(spec, sol) -> np.ndarray:
     return g @ sol.shapes
 
 
-def _amplitude_frequency(ctx, spec, sol, j: int, force: float, hit, preload_factor: float) -> float:
-    """Energy-weighted frequency (Hz) of model mode j after a hit of peak force F (describing function)."""
+def _amplitude_frequency(ctx, spec, sol, j: int, force: float, hit, preload_factor: float,
+                         roller_modal=None) -> float:
+    """Energy-weighted frequency (Hz) of model mode j after a hit of peak force F (describing function).
+
+    ``roller_modal``: :func:`_roller_modal` of (spec, sol) if already computed.
+    """
     from guidefit.model.vibration import rigid_body_map
 
     log_r, table = _df_table(ctx.guide)
@@ -566,7 +570,7 @@ def _amplitude_frequency(ctx, spec, sol, j: int, force: float, hit, preload_fact
     w0 = 2 * math.pi * sol.frequencies_hz[j]
     b = float(direction @ (rigid_body_map(point) @ phi[:5]))
     a0 = abs(b) * force * _pulse_spectrum(w0, pulse) / w0
-    c = _roller_modal(spec, sol)[:, j]
+    c = (_roller_modal(spec, sol) if roller_modal is None else roller_modal)[:, j]
     k = spec.rollers.stiffness_n_per_m
     delta = preload_factor * ctx.guide.preload_m
     r = np.abs(c)[:, None] * (_GL_S[None, :] * a0) / delta
@@ -592,11 +596,12 @@ def _evaluate(ctx, data: _Data, effects) -> _Eval:
     amp = next((e.parameters["preload_factor"] for e in effects if e.name == "amplitude_dependence"), None)
     fm = sol.frequencies_hz
     f_pred = np.where(pairing >= 0, fm[np.maximum(pairing, 0)], np.nan)
+    c_all = _roller_modal(spec, sol) if amp is not None else None
     if amp is not None:
         for i in range(data.f.size):
             if pairing[i] >= 0 and math.isfinite(data.mode_force[i]):
                 f_pred[i] = _amplitude_frequency(ctx, spec, sol, pairing[i], data.mode_force[i],
-                                                 data.mode_hit[i], amp)
+                                                 data.mode_hit[i], amp, c_all)
     r_f = np.where(pairing >= 0, (f_pred - data.f) / data.sigma, UNPAIRED_PENALTY)
     r_f = np.nan_to_num(r_f, nan=UNPAIRED_PENALTY)
     blocks = [r_f]
@@ -615,7 +620,7 @@ def _evaluate(ctx, data: _Data, effects) -> _Eval:
         if j is None:
             continue
         lv_pred[k] = fm[j] if amp is None else _amplitude_frequency(
-            ctx, spec, sol, j, data.lv_force[k], data.lv_hit[k], amp)
+            ctx, spec, sol, j, data.lv_force[k], data.lv_hit[k], amp, c_all)
     r_lv = np.where(np.isfinite(lv_pred), (lv_pred - data.lv_f) / np.maximum(data.lv_sigma, 1e-300),
                     UNPAIRED_PENALTY)
     blocks.append(r_lv)
@@ -844,13 +849,18 @@ def _fit(ctx, data: _Data, variants: tuple, starts: list, n_polish: int = 2, max
 
 
 def _reduced(fit: _Fit, variants: list):
-    """The same combination with a variant whose stiffness went rigid replaced by its simpler form."""
+    """The same combination with a variant whose stiffness went rigid replaced by its simpler form.
+
+    Returns (variants, start values) or None.
+    """
     out_variants, out_values, changed, pos = [], [], False, 0
     by_title = {v.title: v for v in variants}
     for v in fit.variants:
         vals = list(fit.values[pos:pos + len(v.free)])
-        ups = [fr.name for fr, at, t in zip(v.free, fit.at_bound[pos:pos + len(v.free)],
-                                              fit.theta[pos:pos + len(v.free)]) if at and t > 0.5 * sum(fr.bounds)]
+        # a stiffness at (or unidentifiably near) its rigid bound
+        sl = slice(pos, pos + len(v.free))
+        ups = [fr.name for fr, at, ok, t in zip(v.free, fit.at_bound[sl], fit.identifiable[sl], fit.theta[sl])
+               if (at or not ok) and t > 0.5 * sum(fr.bounds)]
         pos += len(v.free)
         target = next((tag for name, tag in v.reduces if name in ups), None)
         simpler = by_title.get(f"{v.effect} ({target})") if target else None
@@ -997,9 +1007,9 @@ def _candidate_entry(fit: _Fit, data: _Data, bic_min: float, nominal: _Eval) -> 
     n_resp = _n_responsive(data, nominal, fit.ev)
     if dof <= 0:
         problems.append(f"not identifiable from these data ({data.n_data} data, {fit.k} parameters)")
-    elif n_resp <= fit.k:
+    elif n_resp <= fit.k and len(fit.variants) > 1:
         problems.append(f"not identifiable from these data: only {n_resp} data respond to its {fit.k} "
-                        "parameter(s), which fit them by construction")
+                        "parameters, which fit them by construction")
     bad = []
     pos = 0
     for v in fit.variants:
@@ -1012,12 +1022,17 @@ def _candidate_entry(fit: _Fit, data: _Data, bic_min: float, nominal: _Eval) -> 
     within = dof > 0 and p >= ACCEPT_P_VALUE
     if dof > 0 and not within:
         problems.append(f"misfit beyond uncertainty (chi2 {fit.chi2:.1f} for {dof} dof)")
-    accepted = within and not bad and n_resp > fit.k
+    combination_ok = len(fit.variants) == 1 or n_resp > fit.k
+    accepted = within and not bad and combination_ok
+    if accepted and n_resp <= fit.k:
+        problems.append(f"within uncertainty; it moves {n_resp} data with {fit.k} parameter(s), the data it "
+                        "leaves unchanged are its test")
     bic = fit.chi2 + fit.k * math.log(data.n_data)
     return {
         "name": "+".join(v.effect for v in fit.variants),
         "variant": " + ".join(v.title for v in fit.variants),
         "effects": _param_dict(fit),
+        "parameters": {f"{e['name']}.{k}": v for e in _param_dict(fit) for k, v in e["parameters"].items()},
         "n_params": fit.k, "n_responsive": n_resp, "chi2": fit.chi2, "dof": dof, "p_value": p, "bic": bic,
         "delta_bic": bic - bic_min,
         "rms_frequency_error_pct": _rms_pct(data, fit.ev)[0],
@@ -1082,7 +1097,7 @@ class _Ctx:
 
 
 def explain_modes(measured, guide, sensors=(), force_levels=(), candidates=None, progress=None,
-                  source: str | None = None) -> Explanation:
+                  source: str | None = None, notes=()) -> Explanation:
     """Pair measured modes with the model, fit candidate effects and select the explanation.
 
     Parameters
@@ -1103,6 +1118,8 @@ def explain_modes(measured, guide, sensors=(), force_levels=(), candidates=None,
         Called as ``progress(done, total, name)`` after each candidate.
     source : str, optional
         Where the modes came from (the ``file`` of the JSON result).
+    notes : list of str, optional
+        Notes of the caller to carry into the result.
 
     Returns
     -------
@@ -1133,7 +1150,7 @@ def explain_modes(measured, guide, sensors=(), force_levels=(), candidates=None,
     measured = list(measured)
     sensors = list(sensors or ())
     force_levels = list(force_levels or ())
-    notes: list[str] = []
+    notes = list(notes)
     data = _prepare(measured, guide, sensors, force_levels, notes)
     ctx = _Ctx(guide, vib.model_from_guide(guide))
     names = list(EFFECTS) if candidates is None else list(candidates)
@@ -1279,6 +1296,99 @@ def explain_modes(measured, guide, sensors=(), force_levels=(), candidates=None,
         source=source, best_attempt=best_attempt, alternatives=tuple(alternatives), n_data=data.n_data,
         settings=settings, fitted_effects=tuple(_effects_of(after_fit.variants, after_fit.values)),
     )
+
+
+# --------------------------------------------------------------------------- synthetic data
+
+
+def default_sensors(guide, axes: str = "xy") -> list:
+    """Accelerometers at the guide's measuring points along the given axes (``acc_A_x``, ...).
+
+    >>> from guidefit.model.guides import load_guide
+    >>> [s.name for s in default_sensors(load_guide("MRB35"), "y")]
+    ['acc_A_y', 'acc_B_y', 'acc_C_y', 'acc_D_y']
+    """
+    unit = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
+    return [Sensor(f"acc_{p}_{a}", tuple(pos), unit[a]) for p, pos in guide.measuring_points_m.items() for a in axes]
+
+
+def synthetic_modes(guide, effects=(), sensors=None, frequency_std: float = 1e-3, shape_std: float | None = 0.01,
+                    seed: int = 0, forces=(), solution=None):
+    """Measured modes with known truth: the model with effects, plus noise.
+
+    Parameters
+    ----------
+    guide : str or Guide
+    effects : list of Effect or "NAME:param=value" strings
+        Applied with :func:`guidefit.model.effects.apply_effects`;
+        ``amplitude_dependence`` also makes the frequency fall with ``forces``.
+    sensors : list of Sensor, optional
+        Default :func:`default_sensors` (A-D, x and y).
+    frequency_std : float
+        Relative standard deviation of the frequency noise (and the one reported).
+    shape_std : float or None
+        Relative per-channel shape noise; None: no shapes.
+    seed : int
+    forces : sequence of float
+        Peak forces (N) of force levels for the vertical and roll_low modes; none by default.
+    solution : ModalSolution, optional
+        Use these modes instead of solving the model (cases outside the library).
+
+    Returns
+    -------
+    (list of MeasuredMode, list of Sensor, list of ForceLevel)
+        Modes that the model labels ``support_*`` come unlabelled (an extra peak).
+
+    Examples
+    --------
+    >>> modes, sensors, levels = synthetic_modes("MRB35", ["contact_stiffness:factor=0.81"], seed=1)
+    >>> [m.label for m in modes]
+    ['yaw', 'pitch', 'roll_low', 'vertical', 'roll_high']
+    """
+    from guidefit.model import vibration as vib
+    from guidefit.model.effects import Effect, apply_effects, make_effect, parse_effect
+    from guidefit.model.guides import Guide, load_guide
+
+    guide = guide if isinstance(guide, Guide) else load_guide(guide)
+    effects = [parse_effect(e) if isinstance(e, str) else make_effect(e.name, e.parameters) if isinstance(
+        e, Effect) else make_effect(*e) for e in effects]
+    sensors = default_sensors(guide) if sensors is None else list(sensors)
+    rng = np.random.default_rng(seed)
+    spec = apply_effects(vib.model_from_guide(guide), guide, effects)
+    sol = vib.solve_modes(spec) if solution is None else solution
+    amp = next((e.parameters["preload_factor"] for e in effects if e.name == "amplitude_dependence"), None)
+    forces = [float(f) for f in forces]
+    ctx = _Ctx(guide, spec)
+    c_all = _roller_modal(spec, sol) if amp is not None and solution is None else None
+    levels = []
+
+    def freq_at(j, label, force):
+        if amp is None or c_all is None:
+            return float(sol.frequencies_hz[j])
+        point, direction = DEFAULT_HITS[label]
+        return _amplitude_frequency(ctx, spec, sol, j, force, (point, np.asarray(direction, float),
+                                                               DEFAULT_PULSE_S), amp, c_all)
+
+    labels = list(sol.labels)
+    for lab in ("vertical", "roll_low") if forces else ():
+        j = labels.index(lab)
+        for force in forces:
+            f = freq_at(j, lab, force)
+            levels.append(ForceLevel(force, lab, f * (1 + frequency_std * rng.standard_normal()), frequency_std * f))
+    f_eff = math.sqrt(float(np.mean(np.square(forces)))) if forces else None
+    modes = []
+    for j, lab in enumerate(labels):
+        f = freq_at(j, lab, f_eff) if (f_eff and lab in ("vertical", "roll_low")) else float(sol.frequencies_hz[j])
+        shape = None
+        if shape_std is not None and sensors:
+            a = np.array([np.asarray(sn.direction, float) @ vib.rigid_body_map(sn.position_m) @ sol.shapes[:5, j]
+                          for sn in sensors])
+            a = a + shape_std * np.linalg.norm(a) / math.sqrt(a.size) * rng.standard_normal(a.size)
+            shape = {sn.name: float(x) for sn, x in zip(sensors, a)}
+        modes.append(MeasuredMode(f * (1 + frequency_std * rng.standard_normal()), frequency_std * f,
+                                  label=None if lab.startswith("support") else lab, shape=shape,
+                                  shape_std=shape_std))
+    return modes, sensors, levels
 
 
 # --------------------------------------------------------------------------- reading modes
@@ -1493,9 +1603,17 @@ def explain_identification(identification, candidates=None, progress=None) -> Ex
     """Explain the modes of an :class:`~guidefit.identify.Identification` (modes, extra modes,
     sensors and force levels of its JSON form)."""
     data = identification.to_dict()
-    modes, _, sensors, levels = modes_from_result(data, str(identification.file))
+    where = str(identification.file)
+    raw_levels = data.pop("force_levels", None) or []
+    modes, _, sensors, _ = modes_from_result(data, where)
+    levels, notes = [], []
+    for k, entry in enumerate(raw_levels):
+        try:
+            levels.append(_level_from(entry, f"{where}: force_levels entry {k}"))
+        except RecordingError as exc:
+            notes.append(f"force level skipped: {exc}")
     return explain_modes(modes, identification.guide, sensors, levels, candidates=candidates,
-                         progress=progress, source=str(identification.file))
+                         progress=progress, source=where, notes=notes)
 
 
 def explain(source, guide=None, candidates=None, progress=None) -> Explanation:
