@@ -98,6 +98,9 @@ class IdentifySettings:
     min_coherence: float = 0.9
     min_accepted_hits: int = 3
     jackknife: bool = True
+    force_levels: bool = False  # per force-level frequencies (for explain's amplitude_dependence)
+    force_bins: int = 3
+    min_force_ratio: float = 1.5
 
 
 @dataclass(frozen=True)
@@ -117,6 +120,7 @@ class IdentifiedMode:
     coherence: float
     half_power: dict | None = None
     raw_damping_ratio: float | None = None
+    fit: object = field(default=None, repr=False, compare=False)  # the guidefit.modes.Mode behind it
 
     def to_dict(self) -> dict:
         """JSON-ready; the contract's label/frequency_hz/damping_ratio plus extras."""
@@ -419,17 +423,69 @@ def _fit_run(run, frf, guide, model, settings, warnings: list) -> list[Identifie
             motion=tuple(float(v) for v in c["q"]), energy={k: float(v) for k, v in c["energy"].items()},
             coherence=_coherence_at(frf, mode.peak_frequency_hz, mode.residues),
             half_power=_half_power_entry(frf, mode, tau), raw_damping_ratio=float(mode.damping_ratio),
+            fit=mode,
         ))
     return out
 
 
+def _force_levels(run, frf, rows, modes, settings, warnings: list) -> list[dict]:
+    """Frequencies of the run's labelled modes per hit-force bin (terciles of the accepted hits).
+
+    Each bin's hits are averaged into their own FRF with the run's windows and
+    refitted from the run's modes; a preloaded Hertz contact shows as a
+    frequency that falls with force. Only when the forces differ by at least
+    ``min_force_ratio``; every bin needs two hits.
+    """
+    from guidefit import frf as frf_mod
+    from guidefit import modes as modes_mod
+    from guidefit.hits import HitSettings, iter_hits
+
+    accepted = [r for r in rows if r["accepted"]]
+    fitted = sorted((m for m in modes if m.label != "extra" and m.fit is not None), key=lambda m: m.frequency_hz)
+    if not fitted or len(accepted) < 2 * settings.force_bins:
+        return []
+    forces = np.array([r["peak_force_n"] for r in accepted])
+    if forces.max() < settings.min_force_ratio * forces.min():
+        return []
+    window = frf_mod.WindowSettings(force_window_s=frf.force_window_s, exp_tau_s=frf.exp_window_tau_s) \
+        if frf.exp_window_tau_s else frf_mod.WindowSettings(none=True)
+    levels = []
+    for members in np.array_split(np.argsort(forces), settings.force_bins):
+        wanted = {accepted[i]["hit"] for i in members}
+        hits = (h for h in iter_hits(run, settings.hits or HitSettings()) if h.index in wanted)
+        try:
+            sub = frf_mod.compute_frf(run, hits, estimator=settings.estimator, window=window)
+        except IdentificationError as exc:
+            warnings.append(f"run '{run.name}': force-level FRF failed ({exc})")
+            return []
+        for m in fitted:
+            # one mode in a narrow band around it: robust against modes trading places
+            half_width = max(3 * m.fit.damping_ratio, 0.03) * m.fit.frequency_hz
+            band = (m.fit.frequency_hz - half_width, m.fit.frequency_hz + half_width)
+            try:
+                r = modes_mod.fit_modes(sub.frequency_hz, sub.H, band, 1, initial=[m.fit], max_nfev=60)[0]
+            except (IdentificationError, ValueError, np.linalg.LinAlgError):
+                continue
+            f_n = r.frequency_hz
+            if frf.exp_window_tau_s:
+                f_n, _ = frf_mod.exponential_window_damping_correction(r.damping_ratio, r.frequency_hz,
+                                                                     frf.exp_window_tau_s)
+            levels.append({"run": run.name, "label": m.label, "peak_force_n": float(np.mean(forces[members])),
+                           "n_hits": int(len(members)), "frequency_hz": float(f_n),
+                           "frequency_std_hz": r.frequency_std_hz,
+                           "hit_position_m": None if run.excitation_position_m is None
+                           else [float(x) for x in run.excitation_position_m],
+                           "hit_direction": [float(x) for x in run.excitation_direction]})
+    return levels
+
+
 MIN_RELATIVE_AMPLITUDE = 5e-3
-MAX_RELATIVE_FREQUENCY_STD = 5e-3
+MAX_RELATIVE_FREQUENCY_STD = 3e-2
 
 
 def _significant(candidates: list[dict]) -> list[dict]:
     """Drop computational modes of the curve fit: modes whose largest modal constant is below
-    0.5 % of the run's strongest mode, or whose frequency is uncertain by more than 0.5 %.
+    0.5 % of the run's strongest mode, or whose frequency is uncertain by more than 3 %.
 
     A real but weakly excited mode (an extra base mode, say) passes both tests
     on any usable recording; a fitted pole that only absorbs noise or a flank
@@ -569,8 +625,9 @@ def identify(path, guide=None, settings: IdentifySettings | None = None) -> Iden
     for run, frf, rows in run_frfs(recording, settings, warnings):
         modes = _fit_run(run, frf, guide, model, settings, warnings)
         all_modes.extend(modes)
+        levels = _force_levels(run, frf, rows, modes, settings, warnings) if settings.force_levels else []
         runs.append(RunResult(run.name, frf, rows, modes, tuple(run.excitation_direction),
-                              frf_channels(run, frf)))
+                              frf_channels(run, frf), levels))
     if not runs:
         raise IdentificationError(f"{path}: no run gave an FRF ({'; '.join(warnings) or 'no hits'})")
     modes, extras, missing = _select(all_modes, model, warnings)
