@@ -131,6 +131,9 @@ from guidefit.errors import ModelError, RecordingError
 
 #: Model-form floor of a mode's relative frequency uncertainty (0.05 %).
 FREQUENCY_FLOOR = 5.0e-4
+#: Floor of a force level's relative frequency uncertainty (0.5 %): the model-form error of the
+#: describing-function prediction (against RK4 integration of the contacts: 0.1-1 % vertical, up to 3 % roll_low).
+FORCE_LEVEL_FLOOR = 5.0e-3
 #: Relative frequency uncertainty of a mode that gives none (1 %, raw peak picking).
 DEFAULT_FREQUENCY_STD = 1.0e-2
 #: Relative per-channel noise of a mode shape that gives none (3 % of its RMS amplitude).
@@ -423,7 +426,7 @@ def _prepare(measured, guide, sensors, force_levels, notes) -> _Data:
         direction = direction / (np.linalg.norm(direction) or 1.0)
         pulse = float(lv.pulse_s) if lv.pulse_s is not None else DEFAULT_PULSE_S
         lv_f.append(float(lv.frequency_hz))
-        lv_s.append(max(float(std), FREQUENCY_FLOOR * float(lv.frequency_hz)))
+        lv_s.append(max(float(std), FORCE_LEVEL_FLOOR * float(lv.frequency_hz)))
         lv_force.append(float(lv.peak_force_n))
         lv_label.append(lab)
         lv_hit.append((tuple(point), direction, pulse))
@@ -1289,6 +1292,7 @@ def explain_modes(measured, guide, sensors=(), force_levels=(), candidates=None,
     settings = {"frequency_floor_pct": 100 * FREQUENCY_FLOOR, "default_frequency_std_pct": 100 * DEFAULT_FREQUENCY_STD,
                 "default_shape_std_pct": 100 * DEFAULT_SHAPE_STD, "accept_p_value": ACCEPT_P_VALUE,
                 "equal_bic": EQUAL_BIC, "unpaired_penalty_sigma": UNPAIRED_PENALTY, "score": "BIC = chi2 + k ln n",
+        "force_level_floor_pct": 100 * FORCE_LEVEL_FLOOR,
                 "model_evaluations": ctx.n_eval}
     return Explanation(
         verdict=verdict, guide=guide.name, error_before=err_before, error_after=err_after,
