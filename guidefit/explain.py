@@ -722,6 +722,11 @@ def _variants(guide, data: _Data, names, notes) -> list[_Variant]:
             if not guide.preload_m > 0:
                 notes.append(f"amplitude_dependence not tried: guide {guide.name} has no preload")
                 continue
+            try:
+                from guidefit.model import static  # noqa: F401 - the contact law of the describing function
+            except ImportError:
+                notes.append("amplitude_dependence not tried: the static contact model is not available")
+                continue
             out.append(_Variant(name, "", {}, (_log("preload_factor", "1", 0.01, 10.0, (0.02, 0.1, 0.3, 1.0, 3.0)),)))
         elif name == "base_mode":
             m = _log("mass_kg", "kg", 1e-3, 1e4, ())
