@@ -117,6 +117,16 @@ def test_two_effects_at_once_are_both_named():
     assert_recovered(run(truth), truth)
 
 
+def test_fitted_spec_reproduces_model_after():
+    from guidefit.explain import fitted_spec
+    from guidefit.model.vibration import solve_modes
+
+    result = run(SINGLE["support_compliance"])
+    sol = solve_modes(fitted_spec(result))
+    for m in result.modes:
+        assert sol.frequency_hz(m["model_after_label"]) == pytest.approx(m["model_after_hz"], rel=1e-9)
+
+
 def test_base_mode_extra_peak_is_evidence():
     result = run(SINGLE["base_mode"])
     assert any("no partner in the nominal model" in n for n in result.notes)
