@@ -266,11 +266,47 @@ def frf_cmd(recording, estimator, window_text, out_path):
         click.echo(f"guidefit: warning: {w}", err=True)
     if out_path:
         from guidefit.frf_io import write_frfs
+        from guidefit.recording import read_recording
 
-        write_frfs(out_path, frfsets)
+        write_frfs(out_path, frfsets, recording=read_recording(recording))
         click.echo(f"FRFs of {len(frfsets)} run(s) written to {out_path}")
     else:
         report.render_frf_summary(frfsets)
+
+
+@main.command(name="explain")
+@click.argument("recording", required=False, type=click.Path(dir_okay=False))
+@click.option("--modes", "modes_path", type=click.Path(dir_okay=False),
+              help="Identified modes instead of a recording (identify --json output or a hand-written list).")
+@click.option("--guide", "guide_name", help="Guide name or TOML (default: the one the input names, else MRB35).")
+@click.option("--candidates", help="Comma-separated effect names to try (default: the whole library).")
+@click.option("--json", "as_json", is_flag=True, help="Print the result as one JSON object.")
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False),
+              help="PNG: measured vs model frequencies (and FRFs) before and after.")
+def explain_cmd(recording, modes_path, guide_name, candidates, as_json, plot_path):
+    """Trace the model-measurement residual to a physical effect; error before and after."""
+    from guidefit import report
+    from guidefit.explain import explain
+
+    if (recording is None) == (modes_path is None):
+        raise click.UsageError("give a RECORDING or --modes FILE (one of them)")
+    names = [c.strip() for c in candidates.split(",")] if candidates else None
+    if names:
+        from guidefit.model.effects import EFFECTS
+
+        unknown = [n for n in names if n not in EFFECTS]
+        if unknown:
+            raise click.BadParameter(f"unknown effect '{unknown[0]}'; have {', '.join(EFFECTS)}",
+                                     param_hint="--candidates")
+    source = modes_path or recording
+    with report.spinner("explaining", enabled=not as_json) as progress:
+        result = explain(source, guide=guide_name, candidates=names, progress=progress)
+    if plot_path:
+        report.plot_explanation_with_frf(result, plot_path, recording)
+    if as_json:
+        click.echo(report.dump_json(result.to_dict()))
+    else:
+        report.render_explanation(result)
 
 
 @main.command(name="export")

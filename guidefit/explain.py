@@ -1647,9 +1647,11 @@ def explain(source, guide=None, candidates=None, progress=None) -> Explanation:
         g = g if not isinstance(g, str | Path) else load_guide(g)
         return explain_modes(modes, g, sensors, levels, candidates=candidates, progress=progress,
                              source=str(path))
-    from guidefit.identify import identify
+    from guidefit.identify import IdentifySettings, identify
 
-    return explain_identification(identify(path, guide=guide), candidates, progress)
+    # force levels feed the amplitude_dependence candidate
+    ident = identify(path, guide=guide, settings=IdentifySettings(force_levels=True))
+    return explain_identification(ident, candidates, progress)
 
 
 def fitted_spec(explanation: Explanation, guide=None):

@@ -7,8 +7,12 @@ from pathlib import Path
 from guidefit.errors import RecordingError
 
 
-def write_frfs(path, frfsets) -> None:
-    """Write FRF sets to ``path``; the suffix chooses the format (.csv, .h5/.hdf5, .uff/.unv)."""
+def write_frfs(path, frfsets, recording=None) -> None:
+    """Write FRF sets to ``path``; the suffix chooses the format (.csv, .h5/.hdf5, .uff/.unv).
+
+    ``recording`` (the source :class:`~guidefit.recording.Recording`) gives UFF
+    files the exact excitation and sensor directions.
+    """
     suffix = Path(path).suffix.lower()
     if suffix == ".csv":
         from guidefit.frf import write_frf_csv
@@ -21,6 +25,6 @@ def write_frfs(path, frfsets) -> None:
     elif suffix in (".uff", ".unv"):
         from guidefit.uff import write_frf_uff
 
-        write_frf_uff(path, frfsets)
+        write_frf_uff(path, frfsets, recording=recording)
     else:
         raise RecordingError(f"{path}: unknown FRF output type '{suffix}'; use .csv, .h5 or .uff")

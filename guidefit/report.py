@@ -22,6 +22,8 @@ def fmt(value, unit: str = "", digits: int = 4) -> str:
     """
     if value is None or (isinstance(value, float) and math.isnan(value)):
         return "-"
+    if isinstance(value, str):
+        return f"{value} {unit}".strip()
     value = float(value)
     if value != 0 and (abs(value) >= 1e5 or abs(value) < 1e-2):
         text = f"{value:.{digits - 1}e}"
@@ -176,6 +178,8 @@ _PARAM_ORDER = ("f_V", "zeta_V", "K_V", "c_V", "f_H", "zeta_H", "K_H", "c_H")
 def _pm(value, std, unit="") -> str:
     if value is None:
         return "-"
+    if isinstance(value, str):
+        return value
     if std is None:
         return fmt(value, unit)
     return f"{fmt(value)} ± {fmt(std)} {unit}".strip()
@@ -312,3 +316,122 @@ def render_frf_summary(frfsets, console=None) -> None:
                       f"{frf.frequency_hz[1] - frf.frequency_hz[0]:.3g}", f"{frf.frequency_hz[i]:.1f}",
                       f"{float(np.mean(frf.coherence[i])):.3f}")
     console.print(table)
+
+
+# --------------------------------------------------------------------------- explain
+
+
+class spinner:  # noqa: N801 - a context manager used like a function
+    """A rich progress bar fed by a ``progress(done, total, name)`` callback (stderr; off when disabled)."""
+
+    def __init__(self, title: str, enabled: bool = True):
+        self._title, self._enabled = title, enabled
+        self._progress, self._task = None, None
+
+    def __enter__(self):
+        if not self._enabled:
+            return None
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
+
+        self._progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+                                  console=_console(stderr=True), transient=True)
+        self._task = self._progress.add_task(self._title, total=None)
+        self._progress.start()
+        return self
+
+    def __call__(self, done, total, name=""):
+        if self._progress is not None:
+            self._progress.update(self._task, completed=done, total=total,
+                                  description=f"{self._title}: {name}" if name else self._title)
+
+    def __exit__(self, *exc):
+        if self._progress is not None:
+            self._progress.stop()
+        return False
+
+
+def render_explanation(result, console=None) -> None:
+    """Verdict, effects with uncertainties, per-mode errors and the ranked candidates."""
+    from rich.table import Table
+
+    console = console or _console()
+    data = result.to_dict()
+    colour = {"adequate": "green", "explained": "cyan", "unexplained": "red"}.get(data["verdict"], "white")
+    before = data["error_before"].get("rms_frequency_error_pct")
+    after = data["error_after"].get("rms_frequency_error_pct")
+    console.print(f"[bold]{data.get('file') or 'modes'}[/bold] (guide {data['guide']}): verdict "
+                  f"[bold {colour}]{data['verdict']}[/bold {colour}]; RMS frequency error "
+                  f"{fmt(before)} % before, {fmt(after)} % after")
+    for eff in data["effects"]:
+        params = ", ".join(f"{k} = {_pm(v.get('value'), v.get('std'))}"
+                           for k, v in eff.get("parameters", {}).items() if isinstance(v, dict))
+        console.print(f"  effect [bold]{eff['name']}[/bold]: {params}")
+    modes = Table(title="modes")
+    for col in ("label", "run", "measured (Hz)", "model before (Hz)", "model after (Hz)", "error before %",
+                "error after %"):
+        modes.add_column(col, justify="left" if col == "label" else "right")
+    for m in data["modes"]:
+        modes.add_row(str(m.get("label")), str(m.get("run") or ""), _pm(m.get("measured_hz"), m.get("measured_std_hz")),
+                      fmt(m.get("model_before_hz")), fmt(m.get("model_after_hz")), fmt(m.get("error_before_pct")),
+                      fmt(m.get("error_after_pct")))
+    console.print(modes)
+    cands = Table(title="candidates (best first)")
+    for col in ("candidate", "k", "chi2/dof", "dBIC", "RMS err %", "accepted"):
+        cands.add_column(col, justify="left" if col == "candidate" else "right")
+    for c in data["candidates"][:10]:
+        dof = c.get("dof") or 0
+        chi = c.get("chi2")
+        cands.add_row(str(c.get("variant") or c.get("name")), str(c.get("n_params")),
+                      "-" if chi is None else (f"{chi / dof:.3g}" if dof else "no dof"),
+                      fmt(c.get("delta_bic")), fmt(c.get("rms_frequency_error_pct")),
+                      "yes" if c.get("accepted") else f"no: {c.get('note') or ''}"[:40])
+    console.print(cands)
+    for note in data["notes"]:
+        console.print(f"note: {note}")
+
+
+def plot_explanation_with_frf(result, path: str, recording=None) -> None:
+    """The explain plot; with a recording, a measured FRF against the model before and after."""
+    from guidefit.explain import plot_explanation
+
+    overlay = None
+    if recording is not None:
+        try:
+            overlay = _frf_overlay(result, recording)
+        except Exception as exc:  # noqa: BLE001 - the overlay is optional; say why it is missing
+            _console(stderr=True).print(f"note: FRF overlay left out ({type(exc).__name__}: {exc})")
+    plot_explanation(result, path, frf=overlay)
+
+
+def _frf_overlay(result, recording) -> dict:
+    """Measured FRF of the channel that shows the vertical mode most, and the model's before/after."""
+    import numpy as np
+
+    from guidefit.explain import fitted_spec
+    from guidefit.identify import IdentifySettings, frf_of_recording
+    from guidefit.model import vibration as vib
+    from guidefit.model.guides import load_guide
+    from guidefit.recording import read_recording
+
+    rec = read_recording(recording)
+    frfsets, _ = frf_of_recording(recording, IdentifySettings(jackknife=False))
+    frf, run = frfsets[0], rec.runs[0]
+    f = frf.frequency_hz
+    band = (f > 300) & (f < 8000)
+    k = int(np.argmax(np.max(np.abs(frf.H[band]), axis=0)))
+    ch = next(c for c in run.channels if c.name == frf.channels[k])
+    guide = load_guide(result.guide)
+    damping = {m.get("label"): 0.02 for m in result.to_dict()["modes"]}
+    hit = run.excitation_position_m if run.excitation_position_m is not None else (0.0, 0.0, 0.0)
+
+    def model(spec):
+        sol = vib.solve_modes(spec)
+        zeta = [damping.get(lab, 0.02) for lab in sol.labels]
+        return vib.accelerance(sol, spec, f[band], zeta, hit, run.excitation_direction,
+                               [ch.position_m], [ch.direction])[:, 0]
+
+    out = {"frequency_hz": f[band], "measured": frf.H[band, k], "before": model(vib.model_from_guide(guide)),
+           "title": f"run '{run.name}', {ch.name} (model damping 2 %)"}
+    if result.verdict == "explained":
+        out["after"] = model(fitted_spec(result, guide))
+    return out
