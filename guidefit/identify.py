@@ -373,6 +373,10 @@ def _fit_run(run, frf, guide, model, settings, warnings: list) -> list[Identifie
     from guidefit.model import vibration as vib
 
     band = _search_band(model, run, settings)
+    if not band[1] > band[0] * 1.05:
+        warnings.append(f"run '{run.name}': sample rate {run.sample_rate_hz:g} Hz too low for the modes "
+                        f"searched from {band[0]:.0f} Hz (needs at least {band[0] / 0.4:.0f} Hz)")
+        return []
     try:
         import warnings as _w
 

@@ -1003,6 +1003,16 @@ def _is_text(head: bytes) -> bool:
 
 
 def _read_hdf5(p: Path, display: str) -> Recording:
+    """Read the structure; HDF5 library errors on a damaged file become one RecordingError."""
+    try:
+        return _read_hdf5_structure(p, display)
+    except RecordingError:
+        raise
+    except (OSError, RuntimeError, KeyError, ValueError, TypeError) as exc:
+        raise RecordingError(f"{display}: damaged HDF5 file ({_first_line(exc)})") from None
+
+
+def _read_hdf5_structure(p: Path, display: str) -> Recording:
     import h5py
 
     try:
@@ -1190,7 +1200,7 @@ def _raw_read(run: Run, index: tuple) -> np.ndarray:
         try:
             with h5py.File(source.path, "r") as f:
                 return f[source.dataset][index]
-        except (OSError, KeyError, RuntimeError) as exc:
+        except (OSError, KeyError, RuntimeError, ValueError, TypeError) as exc:
             raise RecordingError(
                 f"{run.file or source.path}: run '{run.name}': cannot read samples ({_first_line(exc)})"
             ) from None
