@@ -42,7 +42,7 @@ def render_html(identification, explanation=None, explain_error: str | None = No
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from guidefit.report import fmt, plot_identification
+    from guidefit.report import fmt, plot_identification, significant_digits
 
     result = identification
     buffer = io.BytesIO()
@@ -54,7 +54,8 @@ def render_html(identification, explanation=None, explain_error: str | None = No
              f"<h1>guidefit report</h1><p>file <b>{html.escape(result.file)}</b>, guide "
              f"<b>{html.escape(result.guide.name)}</b> (M = {result.guide.mass_kg:g} kg)</p>",
              "<h2>Joint parameters</h2>"]
-    rows = [[name, fmt(p["value"], p["unit"]), fmt(p["std"], p["unit"])] for name, p in result.parameters.items()]
+    rows = [[name, fmt(p["value"], p["unit"], significant_digits(p["value"], p["std"])), fmt(p["std"], p["unit"], 2)]
+            for name, p in result.parameters.items()]
     parts.append(_table(["parameter", "value", "std (1 sigma)"], rows))
     parts.append("<p>f: undamped natural frequency |p|/2&pi; of the modal curve fit; zeta: viscous damping ratio "
                  "after the exponential-window correction; K, c: Eq. (24)-(29).</p>")
@@ -64,7 +65,8 @@ def render_html(identification, explanation=None, explain_error: str | None = No
     mode_rows = []
     for m in list(result.modes) + list(result.extra_modes):
         hp = m.half_power
-        mode_rows.append([m.label, m.run, fmt(m.frequency_hz, "Hz"), fmt(m.frequency_std_hz, "Hz"),
+        mode_rows.append([m.label, m.run, fmt(m.frequency_hz, "Hz", significant_digits(m.frequency_hz, m.frequency_std_hz)),
+                          fmt(m.frequency_std_hz, "Hz", 2),
                           f"{m.damping_ratio:.4f}", fmt(m.model_frequency_hz, "Hz"), f"{m.coherence:.3f}",
                           "-" if hp is None else f"{hp['zeta_window_corrected']:.4f}"])
     parts.append(_table(["label", "run", "f_n", "std", "zeta", "model", "coherence", "half-power zeta"], mode_rows))

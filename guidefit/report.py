@@ -175,6 +175,17 @@ def plot_sweep(frame, path: str) -> None:
 _PARAM_ORDER = ("f_V", "zeta_V", "K_V", "c_V", "f_H", "zeta_H", "K_H", "c_H")
 
 
+def significant_digits(value, std) -> int:
+    """Digits that show a value to about a tenth of its standard deviation (4 to 10).
+
+    >>> significant_digits(3529.02, 0.02), significant_digits(1.03e9, 5e5)
+    (7, 5)
+    """
+    if std is None or not std or not value or not math.isfinite(std) or not math.isfinite(value):
+        return 4
+    return int(min(10, max(4, math.ceil(math.log10(abs(value) / abs(std))) + 1)))
+
+
 def _pm(value, std, unit="") -> str:
     if value is None:
         return "-"
@@ -182,7 +193,7 @@ def _pm(value, std, unit="") -> str:
         return value
     if std is None:
         return fmt(value, unit)
-    return f"{fmt(value)} ± {fmt(std)} {unit}".strip()
+    return f"{fmt(value, digits=significant_digits(value, std))} ± {fmt(std, digits=2)} {unit}".strip()
 
 
 def render_identification(result, console=None) -> None:
