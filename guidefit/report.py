@@ -111,10 +111,13 @@ def render_sweep(frame, as_json: bool = False, plot_path: str | None = None) -> 
         return
     from rich.table import Table
 
-    table = Table(title="load sweep")
-    for col in frame.columns:
-        table.add_column(col, justify="right")
-    for row in frame.itertuples(index=False):
+    table = Table(title="load sweep (all columns: --json)")
+    shown = [frame.columns[0]] + [c for c in frame.columns if c.startswith(("K_", "f_")) or c == "rows_lifted"]
+    heads = {c: c.replace("_n_per_m", " (N/m)").replace("_nm_per_rad", " (N m/rad)").replace("_hz", " (Hz)")
+             .replace("f_", "").replace("_n", " (N)") for c in shown}
+    for col in shown:
+        table.add_column(heads[col], justify="right")
+    for row in frame[shown].itertuples(index=False):
         table.add_row(*(fmt(v) if isinstance(v, float) else str(v) for v in row))
     _console().print(table)
 
