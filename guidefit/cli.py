@@ -35,7 +35,7 @@ class _Group(click.Group):
             sys.exit(130)
         except (click.exceptions.Exit, click.ClickException, SystemExit):
             raise
-        except Exception as exc:  # a bug of guidefit: still one line, never a traceback
+        except Exception as exc:  # noqa: BLE001 - a bug of guidefit: still one line, never a traceback
             where = ""
             tb = exc.__traceback__
             while tb is not None and tb.tb_next is not None:

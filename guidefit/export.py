@@ -54,7 +54,8 @@ class SpringDamper:
 def read_results(path) -> list[dict]:
     """Results of ``identify --json`` (JSON Lines, or one JSON object / list)."""
     try:
-        text = open(path, encoding="utf-8").read()
+        with open(path, encoding="utf-8") as handle:
+            text = handle.read()
     except OSError as exc:
         raise RecordingError(f"{path}: cannot read ({exc.strerror})") from None
     except UnicodeDecodeError:

@@ -279,7 +279,7 @@ def plot_identification(result, path: str) -> None:
     fig.savefig(path, dpi=110)
 
 
-class file_progress:  # noqa: N801 - used like a function
+class file_progress:
     """A rich progress bar over files on the given console (stderr when stdout carries JSON)."""
 
     def __init__(self, total: int, console=None):
@@ -335,7 +335,7 @@ def render_frf_summary(frfsets, console=None) -> None:
 # --------------------------------------------------------------------------- explain
 
 
-class spinner:  # noqa: N801 - a context manager used like a function
+class spinner:
     """A rich progress bar fed by a ``progress(done, total, name)`` callback (stderr; off when disabled)."""
 
     def __init__(self, title: str, enabled: bool = True):

@@ -7,20 +7,19 @@ what was expected; never a traceback.
 
 import subprocess
 import sys
-from pathlib import Path
 
 import h5py
 import numpy as np
 import pytest
 
-from guidefit.simulate import DEFAULT_RUNS, SimulationConfig, simulate
 from guidefit.recording import write_recording
+from guidefit.simulate import DEFAULT_RUNS, SimulationConfig, simulate
 
 FS = 200_000.0
 
 
 def guidefit(*args, cwd=None):
-    proc = subprocess.run([sys.executable, "-m", "guidefit", *map(str, args)], capture_output=True, text=True,
+    proc = subprocess.run([sys.executable, "-m", "guidefit", *map(str, args)], check=False, capture_output=True, text=True,
                           cwd=cwd, timeout=300)
     return proc.returncode, proc.stdout, proc.stderr
 
@@ -104,7 +103,7 @@ H5_CASES = {
 def test_malformed_hdf5_exit_2_one_line(tmp_path, case):
     mutate, fragment = H5_CASES[case]
     path = write_h5(tmp_path / "bad.h5", mutate)
-    code, out, err = guidefit("identify", path)
+    code, _out, err = guidefit("identify", path)
     assert code == 2, (case, err)
     lines = err.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in err, err
@@ -190,7 +189,7 @@ def test_all_hits_rejected_lists_reasons_in_json(tmp_path):
                                                        force_n=(5000.0, 6000.0)), seed=1)
     path = tmp_path / "clipped.h5"
     write_recording(path, rec)
-    code, out, err = guidefit("identify", path, "--json")
+    code, _out, err = guidefit("identify", path, "--json")
     assert code == 1
     assert "clipped.h5" in err
 
@@ -211,7 +210,7 @@ def test_bad_guide_toml(tmp_path, text, fragment):
 
 
 def test_usage_errors_exit_2():
-    code, _, err = guidefit("identify")
+    code, _, _err = guidefit("identify")
     assert code == 2
-    code, _, err = guidefit("predict", "--calibration", "magic")
+    code, _, _err = guidefit("predict", "--calibration", "magic")
     assert code == 2

@@ -76,7 +76,7 @@ def test_bad_guide_file_via_subprocess(tmp_path):
     guide = tmp_path / "g.toml"
     guide.write_text("name = 'x'\n[carriage]\nmass_kg = -1\n")
     proc = subprocess.run([sys.executable, "-m", "guidefit", "predict", "--guide", str(guide)],
-                          capture_output=True, text=True)
+                          check=False, capture_output=True, text=True)
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("guidefit: error:")

@@ -48,11 +48,11 @@ def test_report_renders_in_headless_chromium(report, tmp_path):
          "--disable-background-networking", "--disable-component-update", "--disable-sync",
          f"--user-data-dir={tmp_path / 'profile'}", "--window-size=1200,2400", f"--screenshot={shot}",
          report.as_uri()],
-        capture_output=True, text=True, timeout=120)
+        check=False, capture_output=True, text=True, timeout=120)
     assert shot.exists(), proc.stderr
     dom = subprocess.run(
         [_browser(), "--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
          f"--user-data-dir={tmp_path / 'profile2'}", "--dump-dom", report.as_uri()],
-        capture_output=True, text=True, timeout=120).stdout
+        check=False, capture_output=True, text=True, timeout=120).stdout
     assert "Joint parameters" in dom and "<img" in dom
     assert shot.stat().st_size > 20_000  # a rendered page with a plot, not a blank one

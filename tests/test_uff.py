@@ -27,7 +27,7 @@ from guidefit.recording import write_recording as write_h5
 
 pyuff = pytest.importorskip("pyuff")
 
-from guidefit.uff import (
+from guidefit.uff import (  # noqa: E402 - after the pyuff skip
     direction_code,
     point_nodes,
     read_uff_recording,
