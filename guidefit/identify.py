@@ -336,34 +336,50 @@ def _half_power_entry(frf, mode, tau_s) -> dict | None:
             "bins_in_band": int(round((hp.f2_hz - hp.f1_hz) / (frf.frequency_hz[1] - frf.frequency_hz[0])))}
 
 
-def _jackknife(frf, modes, band) -> list[tuple[float | None, float | None]]:
-    """Delete-a-group jackknife std of (f_n, zeta) for each mode; None where too few groups."""
+def _narrow_band(mode) -> tuple[float, float]:
+    """A band around one fitted mode: +/- max(3 zeta, 3 %) of its frequency."""
+    half_width = max(3 * mode.damping_ratio, 0.03) * mode.frequency_hz
+    return mode.frequency_hz - half_width, mode.frequency_hz + half_width
+
+
+def _refit_one(frf, mode, max_nfev: int = 60):
+    """Refit one mode in its narrow band, starting from ``mode`` (None when the fit fails)."""
     from guidefit import modes as modes_mod
+
+    try:
+        return modes_mod.fit_modes(frf.frequency_hz, frf.H, _narrow_band(mode), 1, initial=[mode],
+                                   max_nfev=max_nfev)[0]
+    except (IdentificationError, ValueError, np.linalg.LinAlgError):
+        return None
+
+
+def _jackknife(frf, modes) -> list[tuple[float | None, float | None]]:
+    """Delete-a-group jackknife std of (f_n, zeta) for each mode; None where too few groups.
+
+    Each leave-one-group-out FRF is refitted mode by mode in a narrow band
+    around the full fit (one mode and residual terms), which is what makes
+    the jackknife affordable; the full fit's neighbours are outside the band
+    or absorbed by the residual terms.
+    """
+    import warnings as _w
 
     subsets = list(frf.leave_one_group_out()) if hasattr(frf, "leave_one_group_out") else []
     g = len(subsets)
     if g < 3 or not modes:
         return [(None, None)] * len(modes)
-    f_est = np.full((g, len(modes)), np.nan)
-    z_est = np.full((g, len(modes)), np.nan)
-    for j, sub in enumerate(subsets):
-        try:
-            refit = modes_mod.fit_modes(sub.frequency_hz, sub.H, band, len(modes), initial=modes, max_nfev=60)
-        except (IdentificationError, ValueError, np.linalg.LinAlgError):
-            continue
-        for k, m in enumerate(sorted(refit, key=lambda m: m.frequency_hz)):
-            f_est[j, k] = m.frequency_hz
-            z_est[j, k] = m.damping_ratio
     out = []
-    for k in range(len(modes)):
-        ok = np.isfinite(f_est[:, k])
-        n = int(ok.sum())
-        if n < 3:
-            out.append((None, None))
-            continue
-        fk, zk = f_est[ok, k], z_est[ok, k]
-        out.append((math.sqrt((n - 1) / n * np.sum((fk - fk.mean()) ** 2)),
-                    math.sqrt((n - 1) / n * np.sum((zk - zk.mean()) ** 2))))
+    with _w.catch_warnings():
+        _w.simplefilter("ignore")
+        for mode in modes:
+            fits = [r for r in (_refit_one(sub, mode) for sub in subsets) if r is not None]
+            n = len(fits)
+            if n < 3:
+                out.append((None, None))
+                continue
+            fk = np.array([r.frequency_hz for r in fits])
+            zk = np.array([r.damping_ratio for r in fits])
+            out.append((math.sqrt((n - 1) / n * np.sum((fk - fk.mean()) ** 2)),
+                        math.sqrt((n - 1) / n * np.sum((zk - zk.mean()) ** 2))))
     return out
 
 
@@ -390,7 +406,7 @@ def _fit_run(run, frf, guide, model, settings, warnings: list) -> list[Identifie
         warnings.append(f"run '{run.name}': no mode found between {band[0]:.0f} and {band[1]:.0f} Hz ({exc})")
         return []
     fitted = sorted(fitted, key=lambda m: m.frequency_hz)
-    stds = _jackknife(frf, fitted, band) if settings.jackknife else [(None, None)] * len(fitted)
+    stds = _jackknife(frf, fitted) if settings.jackknife else [(None, None)] * len(fitted)
     sensors = sensor_matrix(frf_channels(run, frf))
     mass = vib.carriage_mass_matrix(vib.model_from_guide(guide))
     tau = getattr(frf, "exp_window_tau_s", None)
@@ -441,7 +457,6 @@ def _force_levels(run, frf, rows, modes, settings, warnings: list) -> list[dict]
     ``min_force_ratio``; every bin needs two hits.
     """
     from guidefit import frf as frf_mod
-    from guidefit import modes as modes_mod
     from guidefit.hits import HitSettings, iter_hits
 
     accepted = [r for r in rows if r["accepted"]]
@@ -464,11 +479,8 @@ def _force_levels(run, frf, rows, modes, settings, warnings: list) -> list[dict]
             return []
         for m in fitted:
             # one mode in a narrow band around it: robust against modes trading places
-            half_width = max(3 * m.fit.damping_ratio, 0.03) * m.fit.frequency_hz
-            band = (m.fit.frequency_hz - half_width, m.fit.frequency_hz + half_width)
-            try:
-                r = modes_mod.fit_modes(sub.frequency_hz, sub.H, band, 1, initial=[m.fit], max_nfev=60)[0]
-            except (IdentificationError, ValueError, np.linalg.LinAlgError):
+            r = _refit_one(sub, m.fit)
+            if r is None:
                 continue
             f_n = r.frequency_hz
             if frf.exp_window_tau_s:

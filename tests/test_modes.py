@@ -485,3 +485,17 @@ def test_bad_frequency_and_shape():
         sdof_from_half_power(1000.0, 900.0)
     with pytest.raises(ValueError, match="kind"):
         sdof_from_half_power(900.0, 1000.0, "velocity")
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.integers(-5, 5), min_size=3, max_size=60), st.floats(0.1, 4.0))
+def test_prominent_peaks_equal_scipy_find_peaks(values, min_prominence):
+    import scipy.signal
+
+    from guidefit.modes import prominent_peaks
+
+    y = np.cumsum(np.asarray(values, dtype=float))  # random walks with plateaus and ties
+    idx, prom = prominent_peaks(y, min_prominence)
+    ref, props = scipy.signal.find_peaks(y, prominence=min_prominence)
+    assert idx.tolist() == ref.tolist()
+    np.testing.assert_allclose(prom, props["prominences"])
