@@ -189,14 +189,14 @@ def significant_digits(value, std) -> int:
     return int(min(10, max(4, math.ceil(math.log10(abs(value) / abs(std))) + 1)))
 
 
-def _pm(value, std, unit="") -> str:
+def _pm(value, std, unit="", sep=" ± ") -> str:
     if value is None:
         return "-"
     if isinstance(value, str):
         return value
     if std is None:
         return fmt(value, unit)
-    return f"{fmt(value, digits=significant_digits(value, std))} ± {fmt(std, digits=2)} {unit}".strip()
+    return f"{fmt(value, digits=significant_digits(value, std))}{sep}{fmt(std, digits=2)} {unit}".strip()
 
 
 def render_identification(result, console=None) -> None:
@@ -215,15 +215,19 @@ def render_identification(result, console=None) -> None:
         p = result.parameters[name]
         table.add_row(name, _pm(p["value"], p["std"], p["unit"]), eqs[name])
     console.print(table)
-    modes = Table(title="modes")
-    for col in ("label", "run", "f_n (Hz)", "zeta", "model (Hz)", "coherence", "half-power zeta"):
+    from rich import box
+
+    modes = Table(title="modes (f_n, zeta: curve fit; hp: half-power Eq. 26/28, bins in band)",
+                  box=box.SIMPLE_HEAD, pad_edge=False)
+    for col in ("label", "run", "f_n (Hz)", "zeta", "model (Hz)", "coh.", "hp zeta"):
         modes.add_column(col, justify="right" if col != "label" else "left")
     for m in list(result.modes) + list(result.extra_modes):
         hp = m.half_power
         modes.add_row(
-            m.label, m.run, _pm(m.frequency_hz, m.frequency_std_hz), _pm(m.damping_ratio, m.damping_std),
-            fmt(m.model_frequency_hz), f"{m.coherence:.3f}",
-            "-" if hp is None else f"{hp['zeta_window_corrected']:.4f} ({hp['bins_in_band']} bins)",
+            m.label, m.run, _pm(m.frequency_hz, m.frequency_std_hz),
+            _pm(m.damping_ratio, m.damping_std),
+            "-" if m.model_frequency_hz is None else f"{m.model_frequency_hz:.1f}", f"{m.coherence:.3f}",
+            "-" if hp is None else f"{hp['zeta_window_corrected']:.4f} ({hp['bins_in_band']})",
         )
     console.print(modes)
     rejected = [h for run in result.runs for h in run.hits if not h["accepted"]]
