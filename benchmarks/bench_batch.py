@@ -4,9 +4,10 @@ The N files are copies of ``sample_data/mrb35_sample.h5`` (2 runs x 8 hits x
 0.05 s x 9 channels) under /tmp. Each command runs once in a fresh process
 (``--csv`` to a temporary file, tables to /dev/null); wall time includes the
 interpreter start and imports (once per command for --jobs 1, once per worker
-process more for --jobs 2). Every variant is run with the default BLAS
-threading and with ``OPENBLAS_NUM_THREADS=1``: with two worker processes on
-two cores, BLAS threads oversubscribe the machine.
+process more for --jobs 2). Every variant is run with the command line's
+default BLAS threading (one thread since commit ed436ee) and with
+``OPENBLAS_NUM_THREADS=2``: with two worker processes on two cores, BLAS
+threads oversubscribe the machine.
 
 Run: ``python benchmarks/bench_batch.py [--quick] [--files N]`` (default 8
 files; --quick: 4).
@@ -40,12 +41,14 @@ def main() -> None:
         shutil.copyfile(SAMPLE, target)
         files.append(str(target))
     g = guidefit_cmd()
-    one = dict(os.environ, OPENBLAS_NUM_THREADS="1")
+    clean = {k: v for k, v in os.environ.items()
+             if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")}
+    two = dict(clean, OPENBLAS_NUM_THREADS="2")
     variants = [
-        ("--jobs 1", ["--jobs", "1"], None),
-        ("--jobs 2", ["--jobs", "2"], None),
-        ("--jobs 1, OPENBLAS_NUM_THREADS=1", ["--jobs", "1"], one),
-        ("--jobs 2, OPENBLAS_NUM_THREADS=1", ["--jobs", "2"], one),
+        ("--jobs 1", ["--jobs", "1"], clean),
+        ("--jobs 2", ["--jobs", "2"], clean),
+        ("--jobs 1, OPENBLAS_NUM_THREADS=2", ["--jobs", "1"], two),
+        ("--jobs 2, OPENBLAS_NUM_THREADS=2", ["--jobs", "2"], two),
     ]
     rows = []
     base = {}
@@ -59,7 +62,7 @@ def main() -> None:
                 raise RuntimeError(f"{label}: exit {m['returncode']}: {m['stderr'][-1500:]}")
             lines = csv.read_text().strip().splitlines()
             assert len(lines) == n + 1, f"{label}: {len(lines) - 1} rows for {n} files"
-            key = "one" if env else "default"
+            key = "two" if env is two else "default"
             if opts[-1] == "1":
                 base[key] = m["wall_s"]
             speed = f"{base[key] / m['wall_s']:.2f}" if opts[-1] == "2" else "1.00"
