@@ -279,6 +279,10 @@ def label_modes(candidates: list[dict], model) -> list[str]:
     uphi = sorted(groups.get("u_phi", []), key=lambda i: candidates[i]["frequency_hz"])
     if uphi:
         m_u = [abs(candidates[i]["u_energy"]) >= abs(candidates[i]["phi_energy"]) for i in uphi]
+        if not any(m_u) and len(uphi) == 1:
+            # a lone roll-dominated mode is roll_high (a vertical run that misses the damped roll_low)
+            labels[uphi[0]] = "roll_high"
+            return labels
         low = next((i for i, u in zip(uphi, m_u) if u), uphi[0])
         labels[low] = "roll_low"
         rest = [i for i in uphi if i != low and candidates[i]["frequency_hz"] > candidates[low]["frequency_hz"]]
@@ -531,13 +535,26 @@ def frf_channels(run, frf) -> list:
     return [by_name[name] for name in frf.channels]
 
 
-def _select(all_modes: list[IdentifiedMode], model, warnings: list):
-    """One estimate per label (smallest relative frequency std); the others are extra or duplicates."""
+# the excitation axis that drives each mode best (the paper: vertical run, lateral run)
+_PREFERRED_AXIS = {"vertical": 1, "pitch": 1, "roll_low": 0, "yaw": 0}
+
+
+def _select(all_modes: list[IdentifiedMode], model, warnings: list, run_axes: dict | None = None):
+    """One estimate per label; the others are extra or duplicates.
+
+    A label is taken from a run hit along the axis that drives it (vertical
+    and pitch: a vertical run; roll_low and yaw: a lateral run) when such a
+    run shows it, and among those from the estimate with the smallest relative
+    frequency uncertainty.
+    """
     chosen: dict[str, IdentifiedMode] = {}
     extras: list[IdentifiedMode] = []
+    run_axes = run_axes or {}
 
     def quality(m):
-        return (m.frequency_std_hz or 0.01 * m.frequency_hz) / m.frequency_hz
+        axis = _PREFERRED_AXIS.get(m.label)
+        off_axis = axis is not None and run_axes.get(m.run) is not None and run_axes[m.run] != axis
+        return (off_axis, (m.frequency_std_hz or 0.01 * m.frequency_hz) / m.frequency_hz)
 
     for m in all_modes:
         if m.label == "extra":
@@ -646,7 +663,8 @@ def identify(path, guide=None, settings: IdentifySettings | None = None) -> Iden
                               frf_channels(run, frf), levels))
     if not runs:
         raise IdentificationError(f"{path}: no run gave an FRF ({'; '.join(warnings) or 'no hits'})")
-    modes, extras, missing = _select(all_modes, model, warnings)
+    axes = {r.name: int(np.argmax(np.abs(r.excitation_direction))) for r in runs}
+    modes, extras, missing = _select(all_modes, model, warnings, axes)
     joint = {k: next((m for m in modes if m.label == lab), None) for k, lab in JOINT_LABELS.items()}
     if joint["V"] is None and joint["H"] is None:
         raise IdentificationError(f"{path}: neither the vertical nor the horizontal joint mode was found")
