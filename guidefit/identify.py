@@ -363,27 +363,32 @@ def _jackknife(frf, modes) -> list[tuple[float | None, float | None]]:
     Each leave-one-group-out FRF is refitted mode by mode in a narrow band
     around the full fit (one mode and residual terms), which is what makes
     the jackknife affordable; the full fit's neighbours are outside the band
-    or absorbed by the residual terms.
+    or absorbed by the residual terms. The replicates are made one at a time,
+    so memory holds one extra FRF set whatever the number of groups.
     """
     import warnings as _w
 
-    subsets = list(frf.leave_one_group_out()) if hasattr(frf, "leave_one_group_out") else []
-    g = len(subsets)
-    if g < 3 or not modes:
+    if not modes or not hasattr(frf, "leave_one_group_out") or getattr(frf, "n_groups", 0) < 3:
         return [(None, None)] * len(modes)
-    out = []
+    fits: list[list] = [[] for _ in modes]
     with _w.catch_warnings():
         _w.simplefilter("ignore")
-        for mode in modes:
-            fits = [r for r in (_refit_one(sub, mode) for sub in subsets) if r is not None]
-            n = len(fits)
-            if n < 3:
-                out.append((None, None))
-                continue
-            fk = np.array([r.frequency_hz for r in fits])
-            zk = np.array([r.damping_ratio for r in fits])
-            out.append((math.sqrt((n - 1) / n * np.sum((fk - fk.mean()) ** 2)),
-                        math.sqrt((n - 1) / n * np.sum((zk - zk.mean()) ** 2))))
+        for sub in frf.leave_one_group_out():
+            for k, mode in enumerate(modes):
+                r = _refit_one(sub, mode)
+                if r is not None:
+                    fits[k].append(r)
+            del sub
+    out = []
+    for mode_fits in fits:
+        n = len(mode_fits)
+        if n < 3:
+            out.append((None, None))
+            continue
+        fk = np.array([r.frequency_hz for r in mode_fits])
+        zk = np.array([r.damping_ratio for r in mode_fits])
+        out.append((math.sqrt((n - 1) / n * np.sum((fk - fk.mean()) ** 2)),
+                    math.sqrt((n - 1) / n * np.sum((zk - zk.mean()) ** 2))))
     return out
 
 
