@@ -29,7 +29,13 @@ Each measured mode ``i`` contributes
   cannot produce; this is what makes ``base_mode`` win when one exists).
 
 Each force level (the frequency of one mode from the hits of one force bin)
-adds ``(f_model(F) - f_level) / sigma``. Linear models predict the same
+adds ``(d - mean_w(d)) / sigma`` with ``d = f_model(F) - f_level``: the
+levels of one mode from one run are a trend measured with one estimator, and
+only the trend is compared (its weighted mean over the group is removed, one
+degree of freedom per group). The estimator of a level (a narrow refit of the
+hits of one force bin) may sit off the run's full modal fit by more than its
+own standard deviation; the mode itself carries the absolute frequency. A
+label's levels are taken from the run that gave its mode. Linear models predict the same
 frequency at every force; ``amplitude_dependence`` predicts the describing-
 function frequency (below).
 
@@ -131,15 +137,28 @@ from guidefit.errors import ModelError, RecordingError
 
 #: Model-form floor of a mode's relative frequency uncertainty (0.05 %).
 FREQUENCY_FLOOR = 5.0e-4
-#: Floor of a force level's relative frequency uncertainty (0.5 %): the model-form error of the
-#: describing-function prediction (against RK4 integration of the contacts: 0.1-1 % vertical, up to 3 % roll_low).
-FORCE_LEVEL_FLOOR = 5.0e-3
+#: Floor of a force level's relative frequency uncertainty (0.1 %): the model-form error of the predicted
+#: trend with force (against identify on RK4-simulated recordings: 0.02 % for drops up to 0.3 %, up to 0.15 %
+#: for drops near 1 %; see docs/explain.md).
+FORCE_LEVEL_FLOOR = 1.0e-3
+#: Model-form error of the amplitude model, as a share of the frequency shift it predicts (against identify
+#: on RK4-simulated recordings the predicted shift is off by up to a factor 2; see docs/explain.md).
+AMPLITUDE_MODEL_FORM = 0.5
+#: Largest predicted shift (2 % of the frequency) that the amplitude model's error allowance grows with:
+#: beyond it the describing function is outside what was checked, and a model predicting huge shifts
+#: must not buy itself a large uncertainty.
+AMPLITUDE_SHIFT_CAP = 0.02
 #: Relative frequency uncertainty of a mode that gives none (1 %, raw peak picking).
 DEFAULT_FREQUENCY_STD = 1.0e-2
-#: Relative per-channel noise of a mode shape that gives none (3 % of its RMS amplitude).
+#: Relative per-channel noise of a mode shape that gives none and whose sensors do not over-determine
+#: the carriage motion (3 % of its RMS amplitude); otherwise it is estimated (:func:`_shape_noise`).
 DEFAULT_SHAPE_STD = 0.03
 #: Floor of the relative shape noise (sensor positions, carriage not quite rigid).
 SHAPE_STD_FLOOR = 0.01
+#: Floor of a shape noise estimated from the rigid-body residual (2 %): that residual sees random noise,
+#: not the systematic errors of a modal fit (overlapping modes partitioned imperfectly, amplitude-dependent
+#: peaks); on simulated recordings the MAC of a correctly explained mode was down to 0.9986 (docs/explain.md).
+ESTIMATED_SHAPE_STD_FLOOR = 0.02
 #: Residual (standard deviations) of a measured mode that the model cannot produce.
 UNPAIRED_PENALTY = 1000.0
 #: Chi-square p-value from which a model agrees with the data within uncertainty.
@@ -308,6 +327,9 @@ class _Data:
     lv_force: np.ndarray
     lv_label: list
     lv_hit: list  # (point, direction, pulse_s)
+    lv_groups: list  # index arrays into the levels, one per (run, label): a trend by one estimator
+    lv_run: list
+    mode_zeta: np.ndarray  # (n,) damping ratio per measured mode (nan: unknown)
     mode_force: np.ndarray  # (n,) F_eff per measured mode (nan: small amplitude)
     mode_hit: list  # hit geometry per measured mode or None
     n_data: int
@@ -341,6 +363,36 @@ def _real_unit(values: np.ndarray) -> np.ndarray:
     r = np.real(v * np.exp(-1j * angle))
     norm = np.linalg.norm(r)
     return r / norm if norm > 0 else r
+
+
+def _shape_noise(unit: np.ndarray, s_mat: np.ndarray) -> float:
+    """Relative per-channel noise of a unit shape from the part that no rigid carriage motion explains.
+
+    With more channels than observable carriage DOFs (8 channels at A-D in x
+    and y observe 5 DOFs: 3 redundant), the residual of the least-squares
+    rigid-body fit is noise (or a non-rigid carriage), whatever the model:
+    ``s = |m - S q| sqrt(n_ch / (n_ch - rank S))`` relative to the RMS
+    amplitude, with the floor :data:`ESTIMATED_SHAPE_STD_FLOOR`. Without redundancy
+    :data:`DEFAULT_SHAPE_STD` applies.
+    """
+    n = unit.size
+    rank = int(np.linalg.matrix_rank(s_mat))
+    if n <= rank:
+        return DEFAULT_SHAPE_STD
+    q, *_ = np.linalg.lstsq(s_mat, unit, rcond=None)
+    noise = float(np.linalg.norm(unit - s_mat @ q)) * math.sqrt(n / (n - rank))
+    return max(noise, ESTIMATED_SHAPE_STD_FLOOR)
+
+
+def _nonlinear_runs(groups, f, sigma, runs) -> set:
+    """Runs whose force levels, as a whole, change with force beyond their uncertainty (p < ACCEPT_P_VALUE)."""
+    chi2: dict = {}
+    for g in groups:
+        w = sigma[g] ** -2.0
+        z = (f[g] - np.sum(w * f[g]) / np.sum(w)) / sigma[g]
+        c, n = chi2.get(runs[g[0]], (0.0, 0))
+        chi2[runs[g[0]]] = (c + float(z @ z), n + len(g) - 1)
+    return {r for r, (c, n) in chi2.items() if n > 0 and _p_value(c, n) < ACCEPT_P_VALUE}
 
 
 def _finite_positive(x) -> bool:
@@ -394,10 +446,11 @@ def _prepare(measured, guide, sensors, force_levels, notes) -> _Data:
             continue
         s_mat = np.array([np.asarray(by_name[c].direction, float) @ rigid_body_map(by_name[c].position_m)
                           for c in names])
-        s_std = DEFAULT_SHAPE_STD if m.shape_std is None else max(float(m.shape_std), SHAPE_STD_FLOOR)
+        unit = _real_unit(vals)
+        s_std = _shape_noise(unit, s_mat) if m.shape_std is None else max(float(m.shape_std), SHAPE_STD_FLOOR)
         entry = by_set.setdefault(tuple(names), ([], [], s_mat, []))
         entry[0].append(i)
-        entry[1].append(_real_unit(vals))
+        entry[1].append(unit)
         entry[3].append(math.sqrt(len(names)) / s_std)
     if unknown:
         notes.append(f"shape channels without a sensor position ignored: {', '.join(sorted(unknown))}")
@@ -405,7 +458,7 @@ def _prepare(measured, guide, sensors, force_levels, notes) -> _Data:
     for i, r in enumerate(runs_of):
         groups.setdefault(r, []).append(i)
     # force levels
-    lv_f, lv_s, lv_force, lv_label, lv_hit = [], [], [], [], []
+    lv_f, lv_s, lv_force, lv_label, lv_hit, lv_run = [], [], [], [], [], []
     for j, lv in enumerate(force_levels):
         if not isinstance(lv, ForceLevel):
             raise RecordingError(f"force level {j}: expected a ForceLevel, got {type(lv).__name__}")
@@ -430,13 +483,50 @@ def _prepare(measured, guide, sensors, force_levels, notes) -> _Data:
         lv_force.append(float(lv.peak_force_n))
         lv_label.append(lab)
         lv_hit.append((tuple(point), direction, pulse))
+        lv_run.append(lv.run)
+    # A label's levels come from the run that gave its mode (the same hits, the same estimator);
+    # each (run, label) group is a trend with force, compared after removing its weighted mean.
+    keep = []
+    for j, lab in enumerate(lv_label):
+        own = {runs_of[i] for i, ll in enumerate(labels) if ll == lab and runs_of[i] is not None}
+        has_own = any(lv_run[k] in own for k, ll in enumerate(lv_label) if ll == lab)
+        keep.append(not has_own or lv_run[j] in own)
+    by_group: dict = {}
+    for j, ok in enumerate(keep):
+        if ok:
+            by_group.setdefault((lv_run[j], lv_label[j]), []).append(j)
+    used = sorted(j for g in by_group.values() if len(g) >= 2 for j in g)
+    if len(used) < len(lv_f):
+        notes.append(f"{len(lv_f) - len(used)} force level(s) not used (another run's estimate of the mode, "
+                     "or a single level: no trend)")
+    remap = {j: k for k, j in enumerate(used)}
+    lv_groups = [np.array([remap[j] for j in g]) for g in by_group.values() if len(g) >= 2]
+    lv_f, lv_s, lv_force = ([x[j] for j in used] for x in (lv_f, lv_s, lv_force))
+    lv_label, lv_hit, lv_run = ([x[j] for j in used] for x in (lv_label, lv_hit, lv_run))
+    mode_zeta = np.array([m.damping_ratio if _finite_positive(m.damping_ratio) else np.nan for m in measured])
     mode_force = np.full(len(f), np.nan)
     mode_hit: list = [None] * len(f)
     for i, lab in enumerate(labels):
         js = [j for j, ll in enumerate(lv_label) if ll == lab]
+        if not js and runs_of[i] is not None:  # the same hits made every mode of a run
+            js = [j for j, rr in enumerate(lv_run) if rr == runs_of[i]]
         if lab is not None and js:
             mode_force[i] = math.sqrt(float(np.mean(np.square([lv_force[j] for j in js]))))
             mode_hit[i] = lv_hit[js[0]]
+    # A run whose frequencies change with hit force responded nonlinearly: the modal fit of its
+    # amplitude-dependent peaks distorts the shapes (overlapping modes partitioned differently), so its
+    # shapes are not used; its frequencies and force levels are.
+    nonlinear = _nonlinear_runs(lv_groups, np.array(lv_f), np.array(lv_s), lv_run)
+    if nonlinear:
+        dropped = 0
+        for entry in by_set.values():
+            keep_k = [k for k, i in enumerate(entry[0]) if runs_of[i] not in nonlinear]
+            dropped += len(entry[0]) - len(keep_k)
+            entry[0][:], entry[1][:], entry[3][:] = ([x[k] for k in keep_k] for x in (entry[0], entry[1], entry[3]))
+        by_set = {key: e for key, e in by_set.items() if e[0]}
+        if dropped:
+            notes.append(f"run(s) {', '.join(sorted(map(str, nonlinear)))}: the frequency changes with hit force "
+                         f"(p < {ACCEPT_P_VALUE}); the shapes of their {dropped} mode(s) are not used")
     shapes = [(np.array(ix), np.array(mm), s_mat, np.array(sc)) for ix, mm, s_mat, sc in by_set.values()]
     has_shape = np.zeros(len(f), bool)
     for ix, *_ in shapes:
@@ -447,8 +537,8 @@ def _prepare(measured, guide, sensors, force_levels, notes) -> _Data:
         group=np.array([_GROUP.get(lab, -1) if lab else -1 for lab in labels]),
         runs=[np.array(v) for v in groups.values()], shapes=shapes, has_shape=has_shape,
         lv_f=np.array(lv_f), lv_sigma=np.array(lv_s), lv_force=np.array(lv_force), lv_label=lv_label,
-        lv_hit=lv_hit, mode_force=mode_force, mode_hit=mode_hit,
-        n_data=len(f) + n_shape_dof + len(lv_f), n_shape_dof=n_shape_dof,
+        mode_zeta=mode_zeta, lv_hit=lv_hit, lv_groups=lv_groups, lv_run=lv_run, mode_force=mode_force, mode_hit=mode_hit,
+        n_data=len(f) + n_shape_dof + len(lv_f) - len(lv_groups), n_shape_dof=n_shape_dof,
     )
 
 
@@ -560,27 +650,87 @@ def _roller_modal(spec, sol) -> np.ndarray:
 
 
 def _amplitude_frequency(ctx, spec, sol, j: int, force: float, hit, preload_factor: float,
-                         roller_modal=None) -> float:
-    """Energy-weighted frequency (Hz) of model mode j after a hit of peak force F (describing function).
+                         roller_modal=None, zetas=None) -> float:
+    """Frequency (Hz) that a modal fit finds for model mode j after a hit of peak force F.
 
-    ``roller_modal``: :func:`_roller_modal` of (spec, sol) if already computed.
+    Every model mode m rings after the hit with modal amplitude
+    ``A_m(t) = A_m exp(-zeta_m w_m t)``; a roller's excursion is the RMS sum
+    ``a_i(t) = sqrt(sum_m (g_i . phi_m A_m(t))^2)`` (so a vertical hit also
+    softens pitch and roll), and mode j's frequency at time t is the
+    Rayleigh quotient with each roller's describing-function stiffness at
+    ``a_i(t)``. The resulting decay, sweeping from the hit's frequency up to
+    the small-amplitude one, is fitted as identify does
+    (:func:`_decay_fit_frequency`). ``roller_modal``: :func:`_roller_modal`
+    of (spec, sol) if already computed; ``zetas``: damping ratio per model
+    mode (nan or missing: :data:`DEFAULT_DECAY_DAMPING`).
     """
     from guidefit.model.vibration import rigid_body_map
 
     log_r, table = _df_table(ctx.guide)
     point, direction, pulse = hit
-    phi = sol.shapes[:, j]
-    w0 = 2 * math.pi * sol.frequencies_hz[j]
-    b = float(direction @ (rigid_body_map(point) @ phi[:5]))
-    a0 = abs(b) * force * _pulse_spectrum(w0, pulse) / w0
-    c = (_roller_modal(spec, sol) if roller_modal is None else roller_modal)[:, j]
+    w_all = 2 * math.pi * sol.frequencies_hz
+    b = direction @ (rigid_body_map(point) @ sol.shapes[:5])
+    a0 = np.abs(b) * force * np.array([_pulse_spectrum(w, pulse) for w in w_all]) / w_all
+    z = np.full(w_all.size, DEFAULT_DECAY_DAMPING)
+    if zetas is not None:
+        zz = np.asarray(zetas, float)
+        ok = np.isfinite(zz) & (zz > 0) & (zz < 0.5)
+        z[ok] = zz[ok]
+    c = _roller_modal(spec, sol) if roller_modal is None else roller_modal
     k = spec.rollers.stiffness_n_per_m
     delta = preload_factor * ctx.guide.preload_m
-    r = np.abs(c)[:, None] * (_GL_S[None, :] * a0) / delta
+    w0, zj = w_all[j], z[j]
+    t_end = math.log(1e4) / (zj * w0)
+    t = t_end * _DECAY_TIMES
+    amp = a0[None, :] * np.exp(-(z * w_all)[None, :] * t[:, None])  # (times, modes)
+    r = np.sqrt(np.square(c) @ np.square(amp).T) / delta  # (rollers, times)
     d = np.interp(np.log(np.maximum(r, 1e-3)), log_r, table)
-    w2 = w0**2 + np.sum((k * c * c)[:, None] * (d - 1.0), axis=0)
-    w = np.sqrt(np.maximum(w2, 0.0))
-    return float(2.0 * np.sum(_GL_W * _GL_S * w) / (2 * math.pi))
+    w = np.sqrt(np.maximum(w0**2 + np.sum((k * c[:, j] ** 2)[:, None] * (d - 1.0), axis=0), (0.05 * w0) ** 2))
+    if np.max(np.abs(w - w0)) <= 1e-7 * w0:
+        return float(w0 / (2 * math.pi))
+    return _decay_fit_frequency(w0, w, zj)
+
+
+#: Damping ratio of a mode that gives none (simulate's default for most modes).
+DEFAULT_DECAY_DAMPING = 0.02
+_DECAY_TIMES = np.linspace(0.0, 1.0, 65) ** 2  # t / t_end at which w(t) is evaluated (dense early)
+
+
+def _decay_fit_frequency(w0: float, w_of_time: np.ndarray, zeta: float) -> float:
+    """Frequency (Hz) of a single-pole fit to the spectrum of a decay with a time-varying frequency.
+
+    The response ``a(t) sin(theta(t))``, ``a = exp(-zeta w0 t)``,
+    ``theta' = w(t) sqrt(1 - zeta^2)`` (``w_of_time`` at
+    :data:`_DECAY_TIMES` of ``t_end = ln(1e4) / (zeta w0)``), is transformed
+    and fitted near its peak (band +/- max(3 zeta, 3 %), as identify's
+    force-level refits) by ``r/(s - p) + c`` (linearised, two reweighting
+    passes towards the output error). A fit of an FRF weights the slowly
+    sweeping small-amplitude tail most, so it sees a smaller drop than the
+    energy-weighted mean of ``w`` (about half at a 3 % drop).
+    """
+    f0 = w0 / (2 * math.pi)
+    fs = 16.0 * f0
+    t_end = math.log(1e4) / (zeta * w0)
+    n = int(min(max(t_end * fs, 256), 65536))
+    t = np.arange(n) / fs
+    level = np.exp(-zeta * w0 * t)
+    w = np.interp(t, t_end * _DECAY_TIMES, w_of_time) * math.sqrt(1.0 - zeta * zeta)  # |p| = w
+    theta = np.concatenate([[0.0], np.cumsum(0.5 * (w[1:] + w[:-1]) / fs)])
+    x = -(w**2) * level * np.sin(theta)
+    nfft = 1 << int(math.ceil(math.log2(8 * n)))
+    spec = np.fft.rfft(x, nfft)
+    freq = np.arange(spec.size) * fs / nfft
+    half = max(3.0 * zeta, 0.03) * f0
+    sel = (freq > f0 - half) & (freq < f0 + half)
+    h, s = spec[sel], 2j * math.pi * freq[sel]
+    a = np.column_stack([np.ones_like(h), h, s])
+    weight = np.ones(h.size)
+    pole = complex(-zeta * w0, w0)
+    for _ in range(3):
+        coef = np.linalg.lstsq(a * weight[:, None], h * s * weight, rcond=None)[0]
+        pole = complex(coef[1])
+        weight = 1.0 / np.maximum(np.abs(s - pole), 1e-12 * w0)
+    return float(abs(pole) / (2 * math.pi))
 
 
 def _evaluate(ctx, data: _Data, effects) -> _Eval:
@@ -601,11 +751,18 @@ def _evaluate(ctx, data: _Data, effects) -> _Eval:
     f_pred = np.where(pairing >= 0, fm[np.maximum(pairing, 0)], np.nan)
     c_all = _roller_modal(spec, sol) if amp is not None else None
     if amp is not None:
+        zetas = np.full(fm.size, np.nan)  # damping of the model modes from their measured partners
+        zetas[pairing[pairing >= 0]] = data.mode_zeta[pairing >= 0]
         for i in range(data.f.size):
             if pairing[i] >= 0 and math.isfinite(data.mode_force[i]):
                 f_pred[i] = _amplitude_frequency(ctx, spec, sol, pairing[i], data.mode_force[i],
-                                                 data.mode_hit[i], amp, c_all)
-    r_f = np.where(pairing >= 0, (f_pred - data.f) / data.sigma, UNPAIRED_PENALTY)
+                                                 data.mode_hit[i], amp, c_all, zetas)
+    sigma = data.sigma
+    if amp is not None:  # the amplitude model's own error: a share of the shift it predicts
+        shift = np.where(pairing >= 0, fm[np.maximum(pairing, 0)] - f_pred, 0.0)
+        shift = np.minimum(np.abs(np.nan_to_num(shift)), AMPLITUDE_SHIFT_CAP * data.f)
+        sigma = np.hypot(sigma, AMPLITUDE_MODEL_FORM * shift)
+    r_f = np.where(pairing >= 0, (f_pred - data.f) / sigma, UNPAIRED_PENALTY)
     r_f = np.nan_to_num(r_f, nan=UNPAIRED_PENALTY)
     blocks = [r_f]
     mac = np.full(data.f.size, np.nan)
@@ -623,9 +780,17 @@ def _evaluate(ctx, data: _Data, effects) -> _Eval:
         if j is None:
             continue
         lv_pred[k] = fm[j] if amp is None else _amplitude_frequency(
-            ctx, spec, sol, j, data.lv_force[k], data.lv_hit[k], amp, c_all)
-    r_lv = np.where(np.isfinite(lv_pred), (lv_pred - data.lv_f) / np.maximum(data.lv_sigma, 1e-300),
-                    UNPAIRED_PENALTY)
+            ctx, spec, sol, j, data.lv_force[k], data.lv_hit[k], amp, c_all, zetas)
+    r_lv = np.full(data.lv_f.size, UNPAIRED_PENALTY)
+    for g in data.lv_groups:  # the trend within a group: its weighted mean removed (one dof per group)
+        d, s = lv_pred[g] - data.lv_f[g], data.lv_sigma[g]
+        if amp is not None and np.all(np.isfinite(d)):
+            j = _level_mode(data, pairing, sol, data.lv_label[g[0]])
+            shift = np.clip(fm[j] - lv_pred[g], 0.0, AMPLITUDE_SHIFT_CAP * data.lv_f[g])
+            s = np.hypot(s, AMPLITUDE_MODEL_FORM * (shift - shift.mean()))
+        w = s ** -2.0
+        if np.all(np.isfinite(d)):
+            r_lv[g] = (d - np.sum(w * d) / np.sum(w)) / s
     blocks.append(r_lv)
     return _Eval(np.concatenate(blocks), pairing, f_pred, mac, lv_pred, sol)
 
@@ -727,7 +892,8 @@ def _variants(guide, data: _Data, names, notes) -> list[_Variant]:
             except ImportError:
                 notes.append("amplitude_dependence not tried: the static contact model is not available")
                 continue
-            out.append(_Variant(name, "", {}, (_log("preload_factor", "1", 0.01, 10.0, (0.02, 0.1, 0.3, 1.0, 3.0)),)))
+            out.append(_Variant(name, "", {}, (_log("preload_factor", "1", 0.01, 10.0,
+                                                    (0.03, 0.1, 0.2, 0.35, 0.5, 0.7, 1.0, 2.0, 5.0)),)))
         elif name == "base_mode":
             m = _log("mass_kg", "kg", 1e-3, 1e4, ())
             kl = _log("lateral_n_per_m", "N/m", 1e4, 1e13, ())
@@ -1077,12 +1243,10 @@ def _equal_notes(best: dict, others: list, what: str) -> list:
 
 
 def _trend_notes(data: _Data) -> list:
-    """Weighted straight-line trend of frequency with hit force, per label."""
+    """Weighted straight-line trend of frequency with hit force, per (run, label) group."""
     out = []
-    for lab in dict.fromkeys(data.lv_label):
-        idx = [k for k, ll in enumerate(data.lv_label) if ll == lab]
-        if len(idx) < 2:
-            continue
+    for g in data.lv_groups:
+        idx, lab = list(g), data.lv_label[g[0]]
         x, y, s = data.lv_force[idx], data.lv_f[idx], data.lv_sigma[idx]
         w = 1.0 / s**2
         xm = np.sum(w * x) / np.sum(w)
@@ -1092,7 +1256,8 @@ def _trend_notes(data: _Data) -> list:
         slope = np.sum(w * (x - xm) * y) / sxx
         z = slope * math.sqrt(sxx)
         drop = 100.0 * slope * (x.max() - x.min()) / np.average(y, weights=w)
-        out.append(f"{lab}: frequency changes {drop:+.2f} % from {x.min():.0f} N to {x.max():.0f} N "
+        run = data.lv_run[g[0]]
+        out.append(f"{lab}{f' ({run} run)' if run else ''}: frequency changes {drop:+.2f} % from {x.min():.0f} N to {x.max():.0f} N "
                    f"({abs(z):.1f} sigma{', significant' if abs(z) > 3 else ''})")
     return out
 
@@ -1105,7 +1270,7 @@ class _Ctx:
 
 
 def explain_modes(measured, guide, sensors=(), force_levels=(), candidates=None, progress=None,
-                  source: str | None = None, notes=()) -> Explanation:
+                  source: str | None = None, notes=(), *, drop_unproduced_extras: bool = True) -> Explanation:
     """Pair measured modes with the model, fit candidate effects and select the explanation.
 
     Parameters
@@ -1128,6 +1293,10 @@ def explain_modes(measured, guide, sensors=(), force_levels=(), candidates=None,
         Where the modes came from (the ``file`` of the JSON result).
     notes : list of str, optional
         Notes of the caller to carry into the result.
+    drop_unproduced_extras : bool
+        When nothing explains the data and some unlabelled modes (extra
+        peaks) have no partner in the nominal model, try once more without
+        them (see "Extra peaks" in the module documentation).
 
     Returns
     -------
@@ -1158,6 +1327,7 @@ def explain_modes(measured, guide, sensors=(), force_levels=(), candidates=None,
     measured = list(measured)
     sensors = list(sensors or ())
     force_levels = list(force_levels or ())
+    caller_notes = tuple(notes)
     notes = list(notes)
     data = _prepare(measured, guide, sensors, force_levels, notes)
     ctx = _Ctx(guide, vib.model_from_guide(guide))
@@ -1299,12 +1469,48 @@ def explain_modes(measured, guide, sensors=(), force_levels=(), candidates=None,
                 "equal_bic": EQUAL_BIC, "unpaired_penalty_sigma": UNPAIRED_PENALTY, "score": "BIC = chi2 + k ln n",
         "force_level_floor_pct": 100 * FORCE_LEVEL_FLOOR,
                 "model_evaluations": ctx.n_eval}
-    return Explanation(
+    result = Explanation(
         verdict=verdict, guide=guide.name, error_before=err_before, error_after=err_after,
         effects=effects_out, candidates=tuple(ranked), modes=tuple(modes_out), notes=tuple(notes),
         source=source, best_attempt=best_attempt, alternatives=tuple(alternatives), n_data=data.n_data,
         settings=settings, fitted_effects=tuple(_effects_of(after_fit.variants, after_fit.values)),
     )
+    extras = [i for i in range(data.f.size) if data.labels[i] is None and nominal.pairing[i] < 0]
+    if verdict == "unexplained" and extras and drop_unproduced_extras and len(extras) < data.f.size:
+        return _without_extras(result, measured, extras, guide, sensors, force_levels, candidates, progress,
+                               source, caller_notes)
+    return result
+
+
+def _without_extras(result, measured, extras, guide, sensors, force_levels, candidates, progress, source,
+                    notes) -> Explanation:
+    """Explain again without unlabelled extra peaks that no accepted model produces.
+
+    An extra peak of the modal fit is weak evidence: real (a base body, which
+    ``base_mode`` would then have explained) or a fit artefact, e.g. a
+    carriage mode whose frequency sweeps with amplitude fitted by two poles.
+    If an effect explains every other datum, it is named, and the extra
+    peaks are listed as not explained by it.
+    """
+    from dataclasses import replace
+
+    keep = [m for i, m in enumerate(measured) if i not in set(extras)]
+    sub = explain_modes(keep, guide, sensors, force_levels, candidates=candidates, progress=progress,
+                        source=source, notes=(), drop_unproduced_extras=False)
+    if sub.verdict != "explained":
+        return result
+    text = ", ".join(f"{measured[i].frequency_hz:.1f} Hz" for i in extras)
+    note = (f"extra peak(s) at {text} (unlabelled) left out: no candidate produces them together with the "
+            "carriage modes; the effect below explains everything else (the peaks are a fit artefact, e.g. an "
+            "amplitude-dependent peak fitted by two poles, or a cause outside the library)")
+    ignored = [{"label": measured[i].label or "extra", "run": measured[i].run,
+                "measured_hz": float(measured[i].frequency_hz),
+                "measured_std_hz": measured[i].frequency_std_hz, "sigma_hz": None, "model_before_hz": None,
+                "model_before_label": None, "model_after_hz": None, "model_after_label": None,
+                "error_before_pct": None, "error_after_pct": None, "mac_before": None, "mac_after": None,
+                "status": "left out"} for i in extras]
+    return replace(sub, notes=(note, *sub.notes, *notes), modes=tuple(sub.modes) + tuple(ignored),
+                   settings={**sub.settings, "left_out_extra_hz": [float(measured[i].frequency_hz) for i in extras]})
 
 
 # --------------------------------------------------------------------------- synthetic data
