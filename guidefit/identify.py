@@ -346,7 +346,7 @@ def _narrow_band(mode) -> tuple[float, float]:
     return mode.frequency_hz - half_width, mode.frequency_hz + half_width
 
 
-def _refit_one(frf, mode, max_nfev: int = 60):
+def _refit_one(frf, mode, max_nfev: int = 20):
     """Refit one mode in its narrow band, starting from ``mode`` (None when the fit fails)."""
     from guidefit import modes as modes_mod
 
