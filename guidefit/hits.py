@@ -79,7 +79,7 @@ from types import MappingProxyType
 import numpy as np
 
 from guidefit.errors import GuidefitError
-from guidefit.recording import Run, read_block, read_hit
+from guidefit.recording import Run, open_reader, read_block, read_hit  # noqa: F401
 
 __all__ = [
     "CHUNK_SAMPLES",
@@ -94,6 +94,11 @@ __all__ = [
 
 CHUNK_SAMPLES = 1_000_000
 """Samples of the force channel read per step when scanning a ``signals`` run."""
+
+_READ_BYTES = 64 << 20
+"""Largest float64 block read at once when scanning the force of stored hits."""
+_CACHE_BYTES = 32 << 20
+"""Stored hits up to this size in float64 are read once and kept between the two passes."""
 
 DEFAULT_PRETRIGGER_S = 1e-3
 
@@ -380,10 +385,12 @@ def check_hit(
     return _check(run, data, settings, index, start_sample, pretrigger_samples, median_peak_n)
 
 
-def _check(run, data, settings, index, start_sample, pretrigger_samples, median_peak_n) -> Hit:
+def _check(
+    run, data, settings, index, start_sample, pretrigger_samples, median_peak_n, force_base=None
+) -> Hit:
     """Assess ``data`` (float64, owned by the caller's new Hit) and build the Hit."""
     codes, reasons, peak, trigger, metrics = _assess(
-        data, run, settings, pretrigger_samples, median_peak_n
+        data, run, settings, pretrigger_samples, median_peak_n, force_base
     )
     if codes:
         return Hit(
@@ -402,8 +409,12 @@ def _check(run, data, settings, index, start_sample, pretrigger_samples, median_
     return Hit(run.name, index, start_sample, data, peak, True, None, trigger, (), metrics)
 
 
-def _assess(data, run: Run, s: HitSettings, pre: int | None, median_peak):
-    """(codes, reasons, signed peak, pretrigger, metrics) of one record."""
+def _assess(data, run: Run, s: HitSettings, pre: int | None, median_peak, force_base=None):
+    """(codes, reasons, signed peak, pretrigger, metrics) of one record.
+
+    ``force_base``, if given, is the force baseline already computed from the
+    same samples (the median of the pre-trigger or of the whole force).
+    """
     names = run.channel_names
     fs = run.sample_rate_hz
     fi = run.force_index
@@ -424,7 +435,17 @@ def _assess(data, run: Run, s: HitSettings, pre: int | None, median_peak):
         )
     quiet = slice(0, pre - 2) if pre is not None and pre >= 16 else None
     force = data[:, fi]
-    fc = force - (np.median(force[quiet]) if quiet else np.median(force))
+    if force_base is None:
+        force_base = np.median(force[quiet]) if quiet else np.median(force)
+    fc = force - force_base
+    bases = {}
+
+    def base(c):  # baseline of channel c, computed once
+        if c not in bases:
+            col = data[:, c]
+            bases[c] = np.median(col[quiet]) if quiet else np.median(col)
+        return bases[c]
+
     p = int(np.argmax(np.abs(fc)))
     peak = float(fc[p])
     if peak <= 0:
@@ -476,7 +497,9 @@ def _assess(data, run: Run, s: HitSettings, pre: int | None, median_peak):
         codes.append("clipped")
         reasons.append(f"clipped: {', '.join(clipped)}")
 
-    dropout = _dropout(data, run.response_indices, quiet, pre, max(8, round(s.dropout_min_s * fs)))
+    dropout = _dropout(
+        data, run.response_indices, quiet, pre, max(8, round(s.dropout_min_s * fs)), base
+    )
     if dropout is not None:
         a, m = dropout
         codes.append("dropout")
@@ -489,13 +512,14 @@ def _assess(data, run: Run, s: HitSettings, pre: int | None, median_peak):
     worst = 0.0
     slow = []
     for c in run.response_indices:
-        x = data[:, c]
-        x = x - (np.median(x[quiet]) if quiet else np.median(x))
-        top = float(np.max(np.abs(x)))
+        col = data[:, c]
+        m = base(c)
+        # max |x - m| without forming x: rounding is monotone, and min <= m <= max
+        top = float(max(np.max(col) - m, m - np.min(col)))
         if top == 0 or n_end >= n:
             continue
-        rms_end = float(np.sqrt(np.mean(x[-n_end:] ** 2)))
-        noise = float(np.sqrt(np.mean(x[quiet] ** 2))) if quiet else 0.0
+        rms_end = float(np.sqrt(np.mean((col[-n_end:] - m) ** 2)))
+        noise = float(np.sqrt(np.mean((col[quiet] - m) ** 2))) if quiet else 0.0
         ratio = rms_end * math.sqrt(2) / top
         worst = max(worst, ratio)
         if ratio > s.max_end_ratio and rms_end > 3 * noise:
@@ -564,30 +588,50 @@ def _double_hit(
 
 
 def _dropout(
-    data: np.ndarray, responses, quiet, trigger: int, min_len: int
+    data: np.ndarray, responses, quiet, trigger: int, min_len: int, base=None
 ) -> tuple[int, int] | None:
     """(first sample, length) of a block where every channel holds its value, or None.
 
     Only blocks that start at or after the trigger and before the responses
     have decayed below 10 % of their peaks count: there a live signal cannot
-    stand still in every channel at once.
+    stand still in every channel at once. ``base(c)``, if given, returns the
+    baseline of channel c (the median of its pre-trigger, or of all of it).
     """
-    still = np.all(data[1:] == data[:-1], axis=1)  # sample i + 1 equals sample i everywhere
-    if not still.any() or not responses:
+    if not responses:
+        return None
+    # steps i where sample i + 1 equals sample i in every channel: narrowed
+    # channel by channel (responses first: they are rarely still)
+    order = list(responses) + [c for c in range(data.shape[1]) if c not in responses]
+    col = data[:, order[0]]
+    still = np.flatnonzero(col[1:] == col[:-1])
+    for c in order[1:]:
+        if not still.size:
+            break
+        col = data[:, c]
+        still = still[col[still + 1] == col[still]]
+    if not still.size:
+        return None
+    breaks = np.flatnonzero(np.diff(still) > 1)
+    starts = np.r_[still[0], still[breaks + 1]]
+    ends = np.r_[still[breaks], still[-1]] + 1  # exclusive, in steps: samples starts .. ends are equal
+    lengths = ends - starts + 1
+    candidates = np.flatnonzero((lengths >= min_len) & (starts >= trigger))
+    if not candidates.size:
         return None
     active_end = 0
     for c in responses:
-        x = data[:, c] - (np.median(data[quiet, c]) if quiet else np.median(data[:, c]))
+        if base is None:
+            m = np.median(data[quiet, c]) if quiet else np.median(data[:, c])
+        else:
+            m = base(c)
+        x = data[:, c] - m
         top = np.max(np.abs(x))
         if top > 0:
             active_end = max(active_end, int(np.flatnonzero(np.abs(x) >= 0.1 * top)[-1]))
-    edges = np.diff(np.r_[0, still.astype(np.int8), 0])
-    starts = np.flatnonzero(edges == 1)
-    ends = np.flatnonzero(edges == -1)  # exclusive, in steps: samples starts .. ends are equal
-    for a, b in zip(starts, ends):
-        length = int(b - a + 1)
-        if length >= min_len and trigger <= a < active_end:
-            return int(a), length
+    for k in candidates:
+        a = int(starts[k])
+        if a < active_end:
+            return a, int(lengths[k])
     return None
 
 
@@ -599,11 +643,12 @@ def _flat_top(x: np.ndarray, min_run: int) -> tuple[int, float] | None:
     of its ends, the signal lies more than ``4 + 96 / (m - 2)**2`` LSB below it.
     """
     n = x.size
-    biggest = float(np.max(np.abs(x)))
+    hi, lo = float(np.max(x)), float(np.min(x))
+    biggest = max(hi, -lo)  # = max |x|
     if biggest == 0:
         return None
     lsb = None
-    for value in {float(np.max(x)), float(np.min(x))}:
+    for value in {hi, lo}:
         if abs(value) < 0.9 * biggest:
             continue
         at = np.flatnonzero(x == value)
@@ -624,8 +669,9 @@ def _flat_top(x: np.ndarray, min_run: int) -> tuple[int, float] | None:
                 drops.append(abs(value - x[b + min(k, n - 1 - b)]))
             if not drops:  # stuck at a non-zero value over the whole record
                 return m, value
-            if lsb is None:
-                steps = np.diff(np.unique(x))
+            if lsb is None:  # smallest step between distinct values (as np.diff(np.unique(x)))
+                steps = np.diff(np.sort(x))
+                steps = steps[steps > 0]
                 lsb = float(np.min(steps)) if steps.size else math.inf
             if min(drops) > (4 + 96 / (m - 2) ** 2) * lsb:
                 return m, value
@@ -713,28 +759,51 @@ def iter_hits(
 
 
 def _stored_hits(run: Run, s: HitSettings, length: int) -> Iterator[Hit]:
+    """Two passes with the file open once: the force of every hit (for the
+    run's median peak), then each hit in full. A run of at most
+    ``_CACHE_BYTES`` (as float64) is read only once; a larger one has its force
+    read in blocks of at most ``_READ_BYTES``."""
     fi = run.force_index
     pre = run.pretrigger_samples
-    peaks = []
-    for i in range(run.n_hits_stored):
-        force = read_hit(run, i, [fi])[:length, 0]
-        finite = np.isfinite(force)
-        quiet = finite[: pre - 2] if pre is not None and pre >= 16 else finite
-        base = force[: quiet.size][quiet]
-        if base.size:
-            peaks.append(abs(_signed_extreme(force[finite] - np.median(base))))
-    median_peak = float(np.median(peaks)) if peaks else None
-    for i in range(run.n_hits_stored):
-        data = read_hit(run, i)[:length]
-        yield _check(run, data, s, i, 0, pre, median_peak)
+    n_hits = run.n_hits_stored
+    with open_reader(run) as reader:
+        cache = None
+        if n_hits * length * run.n_channels * 8 <= _CACHE_BYTES:
+            cache = reader.read_hits(0, n_hits, None, length)
+            blocks = [(0, cache[:, :, fi])]
+        else:
+            per = max(1, _READ_BYTES // (8 * length))
+            blocks = (
+                (i0, reader.read_hits(i0, min(n_hits, i0 + per), [fi], length)[:, :, 0])
+                for i0 in range(0, n_hits, per)
+            )
+        peaks = []
+        bases = [None] * n_hits  # force baseline of each all-finite force, reused below
+        for i0, forces in blocks:
+            for k, force in enumerate(forces):
+                finite = np.isfinite(force)
+                quiet = finite[: pre - 2] if pre is not None and pre >= 16 else finite
+                base = force[: quiet.size][quiet]
+                if base.size:
+                    median = np.median(base)
+                    if finite.all():
+                        bases[i0 + k] = median
+                    peaks.append(abs(_signed_extreme(force[finite] - median)))
+        median_peak = float(np.median(peaks)) if peaks else None
+        for i in range(n_hits):
+            if cache is not None:
+                data = cache[i].copy()
+            else:
+                data = reader.read_hits(i, i + 1, None, length)[0]
+            yield _check(run, data, s, i, 0, pre, median_peak, bases[i])
 
 
-def _force_stats(run: Run, chunk: int) -> tuple[float, float, float]:
+def _force_stats(run: Run, chunk: int, reader) -> tuple[float, float, float]:
     """(mean, max, min) of the finite force samples, streamed."""
     total, count = 0.0, 0
     hi, lo = -math.inf, math.inf
     for start in range(0, run.n_samples, chunk):
-        f = read_block(run, start, min(run.n_samples, start + chunk), [run.force_index])[:, 0]
+        f = reader.read_block(start, min(run.n_samples, start + chunk), [run.force_index])[:, 0]
         f = f[np.isfinite(f)]
         if f.size:
             total += float(np.sum(f))
@@ -745,7 +814,7 @@ def _force_stats(run: Run, chunk: int) -> tuple[float, float, float]:
     return total / count, hi, lo
 
 
-def _find_triggers(run: Run, level: float, offset: float, holdoff: int, chunk: int):
+def _find_triggers(run: Run, level: float, offset: float, holdoff: int, chunk: int, reader):
     """Trigger samples and the signed peak of ``f - offset`` in each hold-off window."""
     triggers: list[int] = []
     peaks: list[float] = []
@@ -755,7 +824,7 @@ def _find_triggers(run: Run, level: float, offset: float, holdoff: int, chunk: i
     n = run.n_samples
     for start in range(0, n, chunk):
         stop = min(n, start + chunk)
-        x = read_block(run, start, stop, [run.force_index])[:, 0] - offset
+        x = reader.read_block(start, stop, [run.force_index])[:, 0] - offset
         with np.errstate(invalid="ignore"):
             above = np.abs(x) >= level
         before = np.empty_like(above)
@@ -789,9 +858,14 @@ def _find_triggers(run: Run, level: float, offset: float, holdoff: int, chunk: i
 
 
 def _signal_hits(run: Run, s: HitSettings, chunk: int) -> Iterator[Hit]:
+    with open_reader(run) as reader:  # one open file for all the reads
+        yield from _signal_hits_read(run, s, chunk, reader)
+
+
+def _signal_hits_read(run: Run, s: HitSettings, chunk: int, reader) -> Iterator[Hit]:
     fs = run.sample_rate_hz
     n = run.n_samples
-    offset, hi, lo = _force_stats(run, chunk)
+    offset, hi, lo = _force_stats(run, chunk, reader)
     if not math.isfinite(offset):
         return
     level = (
@@ -802,7 +876,7 @@ def _signal_hits(run: Run, s: HitSettings, chunk: int) -> Iterator[Hit]:
     if not level > 0:
         return
     holdoff = max(1, round(s.holdoff_s * fs))
-    triggers, peaks = _find_triggers(run, level, offset, holdoff, chunk)
+    triggers, peaks = _find_triggers(run, level, offset, holdoff, chunk, reader)
     if not triggers:
         return
     if s.pretrigger_s is not None:
@@ -856,5 +930,5 @@ def _signal_hits(run: Run, s: HitSettings, chunk: int) -> Iterator[Hit]:
                 dict.fromkeys(_METRICS, math.nan),
             )
             continue
-        data = read_block(run, start, stop)
+        data = reader.read_block(start, stop)
         yield _check(run, data, s, k, start, pre, median_peak)

@@ -56,9 +56,11 @@ __all__ = [
     "RecordingData",
     "Run",
     "RunData",
+    "RunReader",
     "SignalsWriter",
     "default_channel_geometry",
     "default_points",
+    "open_reader",
     "open_signals_writer",
     "read_block",
     "read_hit",
@@ -1317,6 +1319,167 @@ def read_hit(run: Run, index: int, channels: Sequence[int] | None = None) -> np.
     cols, reorder, scale = _column_index(run, channels)
     raw = _raw_read(run, (int(index), slice(None), cols))
     return _to_si(raw, reorder, scale)
+
+
+
+class RunReader:
+    """Reads many blocks or hits of one run through one open file; see :func:`open_reader`.
+
+    :meth:`read_block` and :meth:`read_hit` take the same arguments, check them
+    the same way and return the same float64 SI arrays as the module functions
+    :func:`read_block` and :func:`read_hit`; :meth:`read_hits` reads several
+    stored hits at once.
+    """
+
+    def __init__(self, run: Run, dataset=None):
+        self._run = run
+        self._ds = dataset  # open h5py dataset, or None for in-memory samples
+
+    @property
+    def run(self) -> Run:
+        """The run being read."""
+        return self._run
+
+    def _raw(self, index: tuple) -> np.ndarray:
+        run = self._run
+        if self._ds is None:
+            return _raw_read(run, index)
+        try:
+            return self._ds[index]
+        except (OSError, KeyError, RuntimeError, ValueError, TypeError) as exc:
+            raise RecordingError(
+                f"{run.file or run.source.path}: run '{run.name}': cannot read samples ({_first_line(exc)})"
+            ) from None
+
+    def read_block(
+        self, start: int = 0, stop: int | None = None, channels: Sequence[int] | None = None
+    ) -> np.ndarray:
+        """Same as :func:`read_block` ``(run, start, stop, channels)``."""
+        run = self._run
+        if run.layout != "signals":
+            raise ValueError(
+                f"run '{run.name}' has layout '{run.layout}'; read its records with read_hit"
+            )
+        stop = run.n_samples if stop is None else stop
+        if not (isinstance(start, (int, np.integer)) and isinstance(stop, (int, np.integer))):
+            raise TypeError(f"start={start!r}, stop={stop!r}: expected integers")
+        if not 0 <= start <= stop <= run.n_samples:
+            raise ValueError(
+                f"start={start}, stop={stop}: expected 0 <= start <= stop <= {run.n_samples} (run '{run.name}')"
+            )
+        cols, reorder, scale = _column_index(run, channels)
+        return _to_si(self._raw((slice(int(start), int(stop)), cols)), reorder, scale)
+
+    def read_hit(self, index: int, channels: Sequence[int] | None = None) -> np.ndarray:
+        """Same as :func:`read_hit` ``(run, index, channels)``."""
+        return self.read_hits(index, index + 1, channels, _name=index)[0]
+
+    def read_hits(
+        self,
+        first: int,
+        last: int,
+        channels: Sequence[int] | None = None,
+        n_samples: int | None = None,
+        *,
+        _name=None,
+    ) -> np.ndarray:
+        """Stored hits ``first:last`` of a ``hits`` run in one read, float64, SI units.
+
+        Parameters
+        ----------
+        first, last : int
+            ``0 <= first < last <= run.n_hits_stored``.
+        channels : sequence of int, optional
+            Column indices to read; all by default.
+        n_samples : int, optional
+            Read only the first ``n_samples`` samples of each hit (all by default).
+
+        Returns
+        -------
+        ndarray, shape (last - first, n_samples, n_selected_channels)
+            ``out[k]`` equals ``read_hit(run, first + k, channels)[:n_samples]``.
+        """
+        run = self._run
+        if run.layout != "hits":
+            raise ValueError(f"run '{run.name}' has layout '{run.layout}'; read it with read_block")
+        if _name is not None:  # read_hit: its own messages
+            if not isinstance(_name, (int, np.integer)):
+                raise TypeError(f"index={_name!r}: expected an integer")
+            if not 0 <= _name < run.n_hits_stored:
+                raise ValueError(
+                    f"index={_name!r}: expected an integer in 0..{run.n_hits_stored - 1} (run '{run.name}')"
+                )
+        elif not (
+            isinstance(first, (int, np.integer))
+            and isinstance(last, (int, np.integer))
+            and 0 <= first < last <= run.n_hits_stored
+        ):
+            raise ValueError(
+                f"first={first!r}, last={last!r}: expected 0 <= first < last <= {run.n_hits_stored} (run '{run.name}')"
+            )
+        n = run.n_samples if n_samples is None else int(n_samples)
+        if not 0 < n <= run.n_samples:
+            raise ValueError(f"n_samples={n_samples!r}: expected 1..{run.n_samples} (run '{run.name}')")
+        cols, reorder, scale = _column_index(run, channels)
+        rows = slice(None) if n == run.n_samples else slice(0, n)
+        return _to_si(self._raw((slice(int(first), int(last)), rows, cols)), reorder, scale)
+
+
+@contextlib.contextmanager
+def open_reader(run: Run) -> Iterator[RunReader]:
+    """Open ``run``'s file once for many reads (bounded memory, like :func:`read_block`).
+
+    :func:`read_block` and :func:`read_hit` open the file for every call, which
+    costs about as much as reading a short record; inside ``with
+    open_reader(run) as reader:`` the calls ``reader.read_block(...)``,
+    ``reader.read_hit(...)`` and ``reader.read_hits(...)`` share one open
+    file and return exactly what the module functions return.
+
+    Raises
+    ------
+    RecordingError
+        The file can no longer be opened.
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> import numpy as np
+    >>> header = RunData("vertical", 1000.0, [0, -1, 0], ["force", "acc_A_y"], ["N", "g"],
+    ...                  [[0, 0, 0], [0.03, 0, 0.045]], [[0, -1, 0], [0, 1, 0]],
+    ...                  data=np.ones((3, 4, 2)), layout="hits")
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     write_recording(os.path.join(folder, "hits.h5"), header)
+    ...     run = read_recording(os.path.join(folder, "hits.h5")).runs[0]
+    ...     with open_reader(run) as reader:
+    ...         one = reader.read_hit(2)
+    ...         forces = reader.read_hits(0, 3, [run.force_index], n_samples=2)
+    ...     same = np.array_equal(one, read_hit(run, 2))
+    >>> same, forces.shape, one[0].tolist()
+    (True, (3, 2, 1), [1.0, 9.80665])
+    """
+    source = run.source
+    if not isinstance(source, _H5Source):
+        if not isinstance(source, _ArraySource):
+            raise TypeError(f"run '{run.name}': unknown sample source {type(source).__name__}")
+        yield RunReader(run)
+        return
+    import h5py
+
+    try:
+        f = h5py.File(source.path, "r")
+        try:
+            ds = f[source.dataset]
+        except BaseException:
+            f.close()
+            raise
+    except (OSError, KeyError, RuntimeError, ValueError, TypeError) as exc:
+        raise RecordingError(
+            f"{run.file or source.path}: run '{run.name}': cannot read samples ({_first_line(exc)})"
+        ) from None
+    try:
+        yield RunReader(run, ds)
+    finally:
+        f.close()
 
 
 # ------------------------------------------------------------------------- CSV

@@ -20,7 +20,7 @@ from guidefit.hits import (
     iter_hits,
     summarise_hits,
 )
-from guidefit.recording import RunData, read_recording, write_recording
+from guidefit.recording import RunData, RunReader, read_recording, write_recording
 
 FS = 200_000.0
 FORCE_RANGE = 2048.0
@@ -406,13 +406,13 @@ def test_signals_triggers_and_common_record_length(tmp_path):
 def test_signals_chunking_does_not_change_the_hits(tmp_path, monkeypatch):
     run = signals_run(tmp_path, signal_with())
     rows_read = []
-    real_read_block = hits_module.read_block
+    real_read_block = RunReader.read_block  # iter_hits reads through one open_reader
 
-    def spy(run_, start, stop, channels=None):
+    def spy(self, start, stop, channels=None):
         rows_read.append(stop - start)
-        return real_read_block(run_, start, stop, channels)
+        return real_read_block(self, start, stop, channels)
 
-    monkeypatch.setattr(hits_module, "read_block", spy)
+    monkeypatch.setattr(RunReader, "read_block", spy)
     small = list(iter_hits(run, chunk_samples=777))  # triggers straddle chunk boundaries
     assert max(rows_read) <= 10_199  # never the whole 60 000-sample signal
     large = list(iter_hits(run, chunk_samples=1_000_000))
