@@ -20,8 +20,10 @@ Each measured mode ``i`` contributes
 * if it has a shape at the sensors: the component of the measured unit shape
   vector perpendicular to the model's, ``(m - a (a . m)) sqrt(n_ch) / s``,
   whose squared norm is ``(1 - MAC) n_ch / s^2``. ``s`` is the relative
-  per-channel noise of the shape (``shape_std``, default 3 % of the RMS
-  amplitude, floor 1 %); these terms are chi-square with ``n_ch - 1``
+  per-channel noise of the shape (``shape_std``, floor 1 %; when not given,
+  estimated from the part of the shape that no rigid carriage motion
+  explains, floor 2 %, or 3 % of the RMS amplitude when the sensors do not
+  over-determine the motion); these terms are chi-square with ``n_ch - 1``
   degrees of freedom. The model shape at a sensor is
   ``direction . rigid_body_map(position) @ shapes[:5]``;
 * if the model has no mode to pair it with: a fixed residual of
@@ -78,19 +80,42 @@ stiffness is ``K_n p^(1/9)``. A roller oscillating with amplitude ``a`` has
 the describing-function (first-harmonic) stiffness
 ``k_eq(a) = (1/(pi a)) int Q(Delta' + a sin t) sin t dt = K_n p^(1/9) D(a/Delta')``;
 ``D`` falls from 1 towards about 0.65 once the roller lifts off (``a > Delta'``).
-A mode's frequency at modal amplitude ``A`` is the Rayleigh quotient with
-``k_eq`` of each roller at ``a_i = |g_i . phi| A``; the identified frequency
-of a decaying response is the energy-weighted mean
-``w_eff = 2 int_0^1 s w(s A0) ds``. ``A0`` follows from the hit: a half-sine
-pulse of peak force F and duration T (default 0.1 ms, a steel tip) gives the
-modal amplitude ``A0 = |b| |P(w)| / w`` with ``P`` the pulse's Fourier
-transform and ``b`` the mode's participation at the hit point and direction
-(default those of :data:`guidefit.simulate.DEFAULT_RUNS`). Fitted to the
-frequencies of several force levels, ``p`` tells where rows start to unload
-(about 1 kN for the MRB35 at its nominal preload). A mode without force
-levels is compared with the small-amplitude model; one with force levels is
-predicted at the force-squared RMS of its levels (H1 averaging weights hits
-by F^2).
+A hit of peak force F (half-sine of duration T, default 0.1 ms, a steel
+tip) leaves every model mode m ringing with modal amplitude
+``A_m = |b_m| |P(w_m)| / w_m`` (``P`` the pulse's Fourier transform, ``b_m``
+the mode's participation at the hit point and direction, default those of
+:data:`guidefit.simulate.DEFAULT_RUNS`), decaying as
+``exp(-zeta_m w_m t)`` (damping from the measured partner, else 2 %).
+Roller i moves with the RMS sum ``a_i(t) = sqrt(sum_m (g_i . phi_m A_m(t))^2)``,
+and mode j's frequency at time t is the Rayleigh quotient with ``k_eq`` of
+each roller at ``a_i(t)``: a vertical hit also softens pitch. The
+identified frequency is what a single-pole fit of the spectrum of the
+resulting chirped decay gives (:func:`_decay_fit_frequency`): a fit of an
+FRF weights the slowly sweeping small-amplitude tail most, so it sees
+roughly half the drop of the energy-weighted mean of ``w(t)``. Fitted to
+the trend over force levels and to the modes, ``p`` tells where rows start
+to unload (about 1 kN for the MRB35 at its nominal preload). A mode of a run
+without force levels is compared with the small-amplitude model; otherwise
+it is predicted at the force-squared RMS of the levels of its label (or,
+without those, of its run: the same hits), since H1 averaging weights hits
+by F^2. Against identify on RK4-simulated recordings the predicted shift is
+good to about a factor 2 (better at drops below 0.3 %), so every predicted
+frequency carries a model-form error of :data:`AMPLITUDE_MODEL_FORM` (50 %)
+of its predicted shift (capped at :data:`AMPLITUDE_SHIFT_CAP` of the
+frequency). A run whose force levels change with force beyond their
+uncertainty has responded nonlinearly; the modal fit of its chirped peaks
+distorts the mode shapes (overlapping modes are partitioned differently), so
+that run's shapes are not used.
+
+Extra peaks
+-----------
+When no candidate is accepted and some unlabelled modes (extra peaks of the
+modal fit) have no partner in the nominal model, the selection is repeated
+without them. If an effect then explains every other datum it is named, and
+the note and the modes table (``status: "left out"``) say which peaks it
+does not produce: a fit artefact (an amplitude-dependent peak fitted with two
+poles) or a cause outside the library. A real base body is found in the
+first pass (``base_mode`` pairs its peak).
 
 Model selection and verdicts
 ----------------------------
@@ -332,6 +357,7 @@ class _Data:
     mode_zeta: np.ndarray  # (n,) damping ratio per measured mode (nan: unknown)
     mode_force: np.ndarray  # (n,) F_eff per measured mode (nan: small amplitude)
     mode_hit: list  # hit geometry per measured mode or None
+    mode_levels: list  # per measured mode: (forces, hits) of the force levels whose hits made its FRF
     n_data: int
     n_shape_dof: int
 
@@ -506,6 +532,7 @@ def _prepare(measured, guide, sensors, force_levels, notes) -> _Data:
     mode_zeta = np.array([m.damping_ratio if _finite_positive(m.damping_ratio) else np.nan for m in measured])
     mode_force = np.full(len(f), np.nan)
     mode_hit: list = [None] * len(f)
+    mode_levels: list = [None] * len(f)
     for i, lab in enumerate(labels):
         js = [j for j, ll in enumerate(lv_label) if ll == lab]
         if not js and runs_of[i] is not None:  # the same hits made every mode of a run
@@ -513,6 +540,7 @@ def _prepare(measured, guide, sensors, force_levels, notes) -> _Data:
         if lab is not None and js:
             mode_force[i] = math.sqrt(float(np.mean(np.square([lv_force[j] for j in js]))))
             mode_hit[i] = lv_hit[js[0]]
+            mode_levels[i] = ([lv_force[j] for j in js], [lv_hit[j] for j in js])
     # A run whose frequencies change with hit force responded nonlinearly: the modal fit of its
     # amplitude-dependent peaks distorts the shapes (overlapping modes partitioned differently), so its
     # shapes are not used; its frequencies and force levels are.
@@ -538,6 +566,7 @@ def _prepare(measured, guide, sensors, force_levels, notes) -> _Data:
         runs=[np.array(v) for v in groups.values()], shapes=shapes, has_shape=has_shape,
         lv_f=np.array(lv_f), lv_sigma=np.array(lv_s), lv_force=np.array(lv_force), lv_label=lv_label,
         mode_zeta=mode_zeta, lv_hit=lv_hit, lv_groups=lv_groups, lv_run=lv_run, mode_force=mode_force, mode_hit=mode_hit,
+        mode_levels=mode_levels,
         n_data=len(f) + n_shape_dof + len(lv_f) - len(lv_groups), n_shape_dof=n_shape_dof,
     )
 
@@ -755,8 +784,12 @@ def _evaluate(ctx, data: _Data, effects) -> _Eval:
         zetas[pairing[pairing >= 0]] = data.mode_zeta[pairing >= 0]
         for i in range(data.f.size):
             if pairing[i] >= 0 and math.isfinite(data.mode_force[i]):
-                f_pred[i] = _amplitude_frequency(ctx, spec, sol, pairing[i], data.mode_force[i],
-                                                 data.mode_hit[i], amp, c_all, zetas)
+                # H1 averages the hits' FRFs with weights F^2: so does the prediction, over the force bins
+                forces, hits = data.mode_levels[i]
+                fk = [_amplitude_frequency(ctx, spec, sol, pairing[i], fo, h, amp, c_all, zetas)
+                      for fo, h in zip(forces, hits)]
+                w2 = np.square(forces)
+                f_pred[i] = float(np.sum(w2 * fk) / np.sum(w2))
     sigma = data.sigma
     if amp is not None:  # the amplitude model's own error: a share of the shift it predicts
         shift = np.where(pairing >= 0, fm[np.maximum(pairing, 0)] - f_pred, 0.0)
@@ -1806,7 +1839,7 @@ def read_modes_json(path):
             except json.JSONDecodeError as exc:
                 raise RecordingError(f"{p}: line {n}: not JSON ({exc.msg})") from None
         if len(objs) != 1:
-            raise RecordingError(f"{p}: {len(objs)} JSON lines (one per recording); explain takes one")
+            raise RecordingError(f"{p}: {len(objs)} JSON lines (one per recording); explain takes one") from None
         obj = objs[0]
     return modes_from_result(obj, str(p))
 
@@ -1938,6 +1971,6 @@ def plot_explanation(explanation: Explanation, path, frf=None) -> str:
     return str(path)
 
 
-from guidefit._api import make_callable
+from guidefit._api import make_callable  # noqa: E402
 
 make_callable(__name__, "explain")
