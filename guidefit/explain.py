@@ -1623,10 +1623,13 @@ def synthetic_modes(guide, effects=(), sensors=None, frequency_std: float = 1e-3
         for force in forces:
             f = freq_at(j, lab, force)
             levels.append(ForceLevel(force, lab, f * (1 + frequency_std * rng.standard_normal()), frequency_std * f))
-    f_eff = math.sqrt(float(np.mean(np.square(forces)))) if forces else None
+    w2 = np.square(forces)
     modes = []
     for j, lab in enumerate(labels):
-        f = freq_at(j, lab, f_eff) if (f_eff and lab in ("vertical", "roll_low")) else float(sol.frequencies_hz[j])
+        if forces and lab in ("vertical", "roll_low"):  # H1 over all hits: the F^2-weighted mean
+            f = float(np.sum(w2 * [freq_at(j, lab, force) for force in forces]) / np.sum(w2))
+        else:
+            f = float(sol.frequencies_hz[j])
         shape = None
         if shape_std is not None and sensors:
             a = np.array([np.asarray(sn.direction, float) @ vib.rigid_body_map(sn.position_m) @ sol.shapes[:5, j]
