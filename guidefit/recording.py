@@ -1422,7 +1422,13 @@ class RunReader:
             raise ValueError(f"n_samples={n_samples!r}: expected 1..{run.n_samples} (run '{run.name}')")
         cols, reorder, scale = _column_index(run, channels)
         rows = slice(None) if n == run.n_samples else slice(0, n)
-        return _to_si(self._raw((slice(int(first), int(last)), rows, cols)), reorder, scale)
+        if self._ds is not None and cols != slice(None):
+            # HDF5 stores whole samples (all channels) together: reading them and
+            # selecting columns here is faster than a strided HDF5 selection
+            raw = self._raw((slice(int(first), int(last)), rows))[..., cols]
+        else:
+            raw = self._raw((slice(int(first), int(last)), rows, cols))
+        return _to_si(raw, reorder, scale)
 
 
 @contextlib.contextmanager

@@ -20,7 +20,14 @@ from guidefit.hits import (
     iter_hits,
     summarise_hits,
 )
-from guidefit.recording import RunData, RunReader, read_recording, write_recording
+from guidefit.recording import (
+    RunData,
+    RunReader,
+    read_block,
+    read_hit,
+    read_recording,
+    write_recording,
+)
 
 FS = 200_000.0
 FORCE_RANGE = 2048.0
@@ -539,3 +546,252 @@ def test_real_pyfrf_hits_are_all_accepted(tmp_path):
     peaks = [h.peak_force_n for h in got]
     assert 65 < min(peaks) and max(peaks) < 90  # README: peaks 68-89 N
     assert all(18 <= h.pretrigger_samples <= 22 for h in got)  # force starts about 22 samples in
+
+
+# ------------------------------------------- optimised iteration vs a plain reference
+
+
+def _reference_flat_top(x, min_run):
+    """hits._flat_top as first written: np.abs, np.unique."""
+    n = x.size
+    biggest = float(np.max(np.abs(x)))
+    if biggest == 0:
+        return None
+    lsb = None
+    for value in {float(np.max(x)), float(np.min(x))}:
+        if abs(value) < 0.9 * biggest:
+            continue
+        at = np.flatnonzero(x == value)
+        if at.size < min_run:
+            continue
+        breaks = np.flatnonzero(np.diff(at) > 1)
+        for a, b in zip(np.r_[at[0], at[breaks + 1]], np.r_[at[breaks], at[-1]]):
+            m = int(b - a + 1)
+            if m < min_run:
+                continue
+            k = max(2, m // 4)
+            drops = []
+            if a >= 2:
+                drops.append(abs(value - x[a - min(k, a)]))
+            if b + 2 < n:
+                drops.append(abs(value - x[b + min(k, n - 1 - b)]))
+            if not drops:
+                return m, value
+            if lsb is None:
+                steps = np.diff(np.unique(x))
+                lsb = float(np.min(steps)) if steps.size else np.inf
+            if min(drops) > (4 + 96 / (m - 2) ** 2) * lsb:
+                return m, value
+    return None
+
+
+def _reference_assess(data, run, s, pre, median_peak, force_base=None):
+    """hits._assess written plainly: every channel and question in its own full pass."""
+    names, fs, fi, n = run.channel_names, run.sample_rate_hz, run.force_index, data.shape[0]
+    metrics = dict.fromkeys(hits_module._METRICS, np.nan)
+    finite = np.isfinite(data)
+    if not finite.all():
+        bad = [names[c] for c in np.flatnonzero(~finite.all(axis=0))]
+        force = data[:, fi][finite[:, fi]]
+        peak = hits_module._signed_extreme(force - np.median(force)) if force.size else np.nan
+        count = int((~finite).sum())
+        return ["non_finite"], [f"non_finite: {count} NaN/Inf sample(s) in {', '.join(bad)}"], peak, pre, metrics
+    quiet = slice(0, pre - 2) if pre is not None and pre >= 16 else None
+
+    def centred(c):
+        x = data[:, c]
+        return x - (np.median(x[quiet]) if quiet else np.median(x))
+
+    fc = centred(fi)
+    p = int(np.argmax(np.abs(fc)))
+    peak = float(fc[p])
+    if peak == 0:
+        return ["too_weak"], ["too_weak: the force is flat"], peak, pre, metrics
+    if peak < 0:
+        return ["negative"], [
+            f"negative: force peak {peak:.4g} N points against excitation_direction (force sign or direction wrong?)"
+        ], peak, pre, metrics
+    if pre is None:
+        level = s.trigger_level_n if s.trigger_level_n is not None else s.trigger_fraction * peak
+        pre = int(np.argmax(fc >= min(level, peak)))
+    codes, reasons = [], []
+    limit, why = 0.0, ""
+    if s.min_peak_force_n is not None:
+        limit, why = s.min_peak_force_n, "the minimum"
+    if median_peak is not None and np.isfinite(median_peak) and s.min_peak_fraction * median_peak > limit:
+        limit = s.min_peak_fraction * median_peak
+        why = f"{s.min_peak_fraction:.0%} of the run's median peak {median_peak:.4g} N"
+    if peak < limit:
+        codes.append("too_weak")
+        reasons.append(f"too_weak: peak {peak:.4g} N below {limit:.4g} N ({why})")
+    double = hits_module._double_hit(fc, p, peak, fs, s, metrics)
+    if double:
+        codes.append("double_hit")
+        reasons.append(f"double_hit: {double}")
+    clipped = []
+    for c in range(data.shape[1]):
+        flat = _reference_flat_top(data[:, c], s.clip_min_run)
+        if flat is not None:
+            clipped.append(f"{names[c]} ({flat[0]} samples at {flat[1]:.6g} {run.channels[c].unit_si})")
+    if clipped:
+        codes.append("clipped")
+        reasons.append(f"clipped: {', '.join(clipped)}")
+    min_len = max(8, round(s.dropout_min_s * fs))
+    still = np.all(data[1:] == data[:-1], axis=1)
+    if still.any() and run.response_indices:
+        active_end = 0
+        for c in run.response_indices:
+            x = centred(c)
+            top = np.max(np.abs(x))
+            if top > 0:
+                active_end = max(active_end, int(np.flatnonzero(np.abs(x) >= 0.1 * top)[-1]))
+        edges = np.diff(np.r_[0, still.astype(np.int8), 0])
+        for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
+            m = int(b - a + 1)
+            if m >= min_len and pre <= a < active_end:
+                codes.append("dropout")
+                reasons.append(
+                    f"dropout: every channel frozen for {m} samples ({m / fs * 1e3:.3g} ms) from sample {a}, "
+                    "while the response is still ringing"
+                )
+                break
+    n_end = max(8, int(np.ceil(s.decay_end_fraction * n)))
+    worst, slow = 0.0, []
+    for c in run.response_indices:
+        x = centred(c)
+        top = float(np.max(np.abs(x)))
+        if top == 0 or n_end >= n:
+            continue
+        rms_end = float(np.sqrt(np.mean(x[-n_end:] ** 2)))
+        noise = float(np.sqrt(np.mean(x[quiet] ** 2))) if quiet else 0.0
+        ratio = rms_end * np.sqrt(2) / top
+        worst = max(worst, ratio)
+        if ratio > s.max_end_ratio and rms_end > 3 * noise:
+            slow.append(f"{names[c]} ends at {ratio:.0%} of its peak")
+    metrics["end_ratio"] = worst
+    if slow:
+        codes.append("not_decayed")
+        reasons.append(f"not_decayed: {', '.join(slow)} (limit {s.max_end_ratio:.0%}, a longer record helps)")
+    return codes, reasons, peak, pre, metrics
+
+
+def _reference_stored_hits(run, s, length):
+    """Stored hits read one call (one file open) at a time, twice; plain checks."""
+    fi, pre = run.force_index, run.pretrigger_samples
+    peaks = []
+    for i in range(run.n_hits_stored):
+        force = read_hit(run, i, [fi])[:length, 0]
+        finite = np.isfinite(force)
+        quiet = finite[: pre - 2] if pre is not None and pre >= 16 else finite
+        base = force[: quiet.size][quiet]
+        if base.size:
+            peaks.append(abs(hits_module._signed_extreme(force[finite] - np.median(base))))
+    median_peak = float(np.median(peaks)) if peaks else None
+    out = []
+    for i in range(run.n_hits_stored):
+        data = read_hit(run, i)[:length].copy()
+        codes, reasons, peak, trigger, metrics = _reference_assess(data, run, s, pre, median_peak)
+        accepted = not codes
+        out.append((i, 0, accepted, "; ".join(reasons) or None, tuple(codes), trigger, peak, metrics,
+                    data if accepted else None))
+    return out
+
+
+class _PlainReader:
+    """open_reader's interface, every read through read_block / read_hit (a file open each)."""
+
+    def __init__(self, run):
+        self.run = run
+
+    def read_block(self, start=0, stop=None, channels=None):
+        return read_block(self.run, start, stop, channels)
+
+
+def _as_tuple(hit):
+    return (hit.index, hit.start_sample, hit.accepted, hit.reason, hit.codes, hit.pretrigger_samples,
+            hit.peak_force_n, dict(hit.metrics), hit.data)
+
+
+def _assert_same_hits(got, want):
+    assert len(got) == len(want)
+    for g, w in zip(got, want):
+        assert g[:6] == w[:6]
+        np.testing.assert_array_equal(g[6], w[6])  # peak (NaN equal to NaN)
+        assert g[7].keys() == w[7].keys()
+        for key in g[7]:
+            np.testing.assert_array_equal(g[7][key], w[7][key])
+        if w[8] is None:
+            assert g[8] is None
+        else:
+            assert g[8].dtype == np.float64 and g[8].shape == w[8].shape and g[8].flags.c_contiguous
+            assert not g[8].flags.writeable
+            np.testing.assert_array_equal(g[8], w[8])
+
+
+@pytest.mark.parametrize("layout", ["hits", "signals"])
+def test_optimised_iteration_matches_a_plain_reference(tmp_path, monkeypatch, layout):
+    from contextlib import contextmanager
+
+    from guidefit.simulate import SimulationConfig, write_simulation
+
+    path = tmp_path / f"faults_{layout}.h5"
+    config = SimulationConfig(
+        faults=("double_hit", "overload", "dropped_hit"), hits=6, record_s=0.02, layout=layout
+    )
+    write_simulation(path, "MRB35", config=config, seed=0)
+    runs = read_recording(path).runs
+    settings = [HitSettings(), HitSettings(min_peak_fraction=0.9)]
+    if layout == "hits":
+        settings.append(HitSettings(record_length_s=0.015))
+    got = {}
+    for run in runs:
+        for k, s in enumerate(settings):
+            got[run.name, k] = [_as_tuple(h) for h in iter_hits(run, s)]
+    codes = {c for hits in got.values() for h in hits for c in h[4]}
+    assert {"double_hit", "clipped", "dropout"} <= codes  # the faults were seen
+    assert any(h[2] for hits in got.values() for h in hits)  # and clean hits accepted
+    if layout == "hits":
+        for run in runs:
+            for k, s in enumerate(settings):
+                length = run.n_samples if s.record_length_s is None else round(s.record_length_s * run.sample_rate_hz)
+                want = _reference_stored_hits(run, s, length)
+                _assert_same_hits(got[run.name, k], want)
+        # the larger-run path: force read in blocks of two hits, every hit read again
+        monkeypatch.setattr(hits_module, "_CACHE_BYTES", 0)
+        monkeypatch.setattr(hits_module, "_READ_BYTES", 2 * 8 * runs[0].n_samples * runs[0].n_channels)
+        for run in runs:
+            for k, s in enumerate(settings):
+                _assert_same_hits([_as_tuple(h) for h in iter_hits(run, s)], got[run.name, k])
+            monkeypatch.undo()
+            want = _reference_stored_hits(run, settings[0], run.n_samples)
+            _assert_same_hits(got[run.name, 0], want)
+            monkeypatch.setattr(hits_module, "_CACHE_BYTES", 0)
+    else:
+        # the same trigger search with a file open per read and the plain checks
+        monkeypatch.setattr(hits_module, "open_reader", contextmanager(lambda run: (yield _PlainReader(run))))
+        monkeypatch.setattr(hits_module, "_assess", _reference_assess)
+        for run in runs:
+            for k, s in enumerate(settings):
+                want = [_as_tuple(h) for h in iter_hits(run, s)]
+                assert [h[1] for h in want] == [h[1] for h in got[run.name, k]]  # record boundaries
+                _assert_same_hits(got[run.name, k], want)
+
+
+def test_fast_median_is_numpy_median():
+    rng = np.random.default_rng(5)
+    for trial in range(300):
+        n = int(rng.integers(1, 60_000))
+        kind = trial % 5
+        if kind == 0:
+            x = rng.standard_normal(n)
+        elif kind == 1:
+            x = np.round(rng.standard_normal(n) * 3) * 0.1  # many ties
+        elif kind == 2:
+            x = np.where(rng.random(n) < rng.random(), 0.0, rng.standard_normal(n))
+        elif kind == 3:
+            t = np.arange(n)
+            x = np.sin(2 * np.pi * t / rng.integers(2, 5000)) * np.exp(-t / rng.integers(100, 100_000))
+        else:
+            x = np.sort(rng.standard_normal(n))[:: 1 if trial % 2 else -1].copy()
+        got, want = hits_module._median(x), np.median(x)
+        assert got == want and type(got) is type(want), (trial, n)
