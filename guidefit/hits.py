@@ -420,8 +420,11 @@ def _assess(data, run: Run, s: HitSettings, pre: int | None, median_peak, force_
     fi = run.force_index
     n = data.shape[0]
     metrics = dict.fromkeys(_METRICS, math.nan)
-    finite = np.isfinite(data)
-    if not finite.all():
+    columns = np.ascontiguousarray(data.T)  # one contiguous row per channel: cheaper passes
+    # max and min of each channel: NaN if it holds a NaN, +-Inf if an Inf
+    tops, bottoms = columns.max(axis=1), columns.min(axis=1)
+    if not (np.isfinite(tops).all() and np.isfinite(bottoms).all()):
+        finite = np.isfinite(data)
         bad = [names[c] for c in np.flatnonzero(~finite.all(axis=0))]
         force = data[:, fi][finite[:, fi]]
         peak = _signed_extreme(force - np.median(force)) if force.size else math.nan
@@ -434,7 +437,6 @@ def _assess(data, run: Run, s: HitSettings, pre: int | None, median_peak, force_
             metrics,
         )
     quiet = slice(0, pre - 2) if pre is not None and pre >= 16 else None
-    columns = np.ascontiguousarray(data.T)  # one contiguous row per channel: cheaper passes
     force = columns[fi]
     if force_base is None:
         force_base = _median(force[quiet]) if quiet else _median(force)
@@ -447,7 +449,9 @@ def _assess(data, run: Run, s: HitSettings, pre: int | None, median_peak, force_
             bases[c] = _median(col[quiet]) if quiet else _median(col)
         return bases[c]
 
-    p = int(np.argmax(np.abs(fc)))
+    # p = argmax |fc| (its first occurrence) from the extremes of fc
+    hi, lo = int(np.argmax(fc)), int(np.argmin(fc))
+    p = hi if fc[hi] > -fc[lo] else lo if fc[hi] < -fc[lo] else min(hi, lo)
     peak = float(fc[p])
     if peak <= 0:
         if peak == 0:
@@ -489,7 +493,7 @@ def _assess(data, run: Run, s: HitSettings, pre: int | None, median_peak, force_
 
     clipped = []
     for c in range(data.shape[1]):
-        flat = _flat_top(columns[c], s.clip_min_run)
+        flat = _flat_top(columns[c], s.clip_min_run, float(tops[c]), float(bottoms[c]))
         if flat is not None:
             m, value = flat
             unit = run.channels[c].unit_si
@@ -516,7 +520,7 @@ def _assess(data, run: Run, s: HitSettings, pre: int | None, median_peak, force_
         col = columns[c]
         m = base(c)
         # max |x - m| without forming x: rounding is monotone, and min <= m <= max
-        top = float(max(np.max(col) - m, m - np.min(col)))
+        top = float(max(tops[c] - m, m - bottoms[c]))
         if top == 0 or n_end >= n:
             continue
         rms_end = float(np.sqrt(np.mean((col[-n_end:] - m) ** 2)))
@@ -666,7 +670,9 @@ def _dropout(
     return None
 
 
-def _flat_top(x: np.ndarray, min_run: int) -> tuple[int, float] | None:
+def _flat_top(
+    x: np.ndarray, min_run: int, hi: float | None = None, lo: float | None = None
+) -> tuple[int, float] | None:
     """(run length, value) of a clipped flat top of ``x``, or None.
 
     A run of m >= ``min_run`` equal samples at the channel's extreme (the side
@@ -674,7 +680,8 @@ def _flat_top(x: np.ndarray, min_run: int) -> tuple[int, float] | None:
     of its ends, the signal lies more than ``4 + 96 / (m - 2)**2`` LSB below it.
     """
     n = x.size
-    hi, lo = float(np.max(x)), float(np.min(x))
+    if hi is None or lo is None:  # max and min of x
+        hi, lo = float(np.max(x)), float(np.min(x))
     biggest = max(hi, -lo)  # = max |x|
     if biggest == 0:
         return None
