@@ -27,6 +27,7 @@ Run from the repository root::
     python benchmarks/explain_recordings.py --seeds 3    # + pass counts over seeds 0-2
     python benchmarks/explain_recordings.py --quick      # fewer hits, no slow nonlinear case
     python benchmarks/explain_recordings.py --case amplitude --json rows.json --keep /tmp/rec
+    python benchmarks/explain_recordings.py --noise 1e-3  # ten times the default sensor noise
 
 Two cores: the script runs one case at a time.
 """
@@ -89,7 +90,8 @@ def guide_file(variant: str | None, folder: Path) -> str:
     return str(path)
 
 
-def run_case(name, effects, changes, variant, kind, folder: Path, seed: int = 0, quick: bool = False) -> dict:
+def run_case(name, effects, changes, variant, kind, folder: Path, seed: int = 0, quick: bool = False,
+             noise: float | None = None) -> dict:
     from guidefit.explain import explain
     from guidefit.model.effects import make_effect
     from guidefit.simulate import SimulationConfig, write_simulation
@@ -97,6 +99,8 @@ def run_case(name, effects, changes, variant, kind, folder: Path, seed: int = 0,
     cfg = {**BASE_CONFIG, **(QUICK_CONFIG if quick else {}), **changes}
     if "hits" in changes:  # a case's own hit count (force levels need >= 6 accepted hits) wins over --quick
         cfg["hits"] = changes["hits"]
+    if noise is not None:
+        cfg["noise_fraction"] = noise
     config = replace(SimulationConfig(), **cfg)
     truth_effects = [make_effect(n, p) for n, p in effects]
     slug = "".join(c if c.isalnum() else "_" for c in name).strip("_")[:40]
@@ -205,6 +209,7 @@ def main() -> int:
     parser.add_argument("--quick", action="store_true", help="4 hits per run (cases with their own count keep it)")
     parser.add_argument("--case", action="append", help="only cases whose name contains this (repeatable)")
     parser.add_argument("--json", help="also write every row as JSON to this file")
+    parser.add_argument("--noise", type=float, help="sensor noise RMS relative to range (default 1e-4)")
     parser.add_argument("--keep", help="write the recordings here (default: a temporary folder)")
     args = parser.parse_args()
     cases = [c for c in CASES if not args.case or any(s.lower() in c[0].lower() for s in args.case)]
@@ -215,7 +220,7 @@ def main() -> int:
         for seed in range(args.seeds):
             for case in cases:
                 print(f"[seed {seed}] {case[0]} ...", file=sys.stderr, flush=True)
-                row = run_case(*case, folder=folder, seed=seed, quick=args.quick)
+                row = run_case(*case, folder=folder, seed=seed, quick=args.quick, noise=args.noise)
                 print(f"    {row['verdict']}: {row['found']}  rms {row['rms_before_pct']:.3f} -> "
                       f"{row['rms_after_pct']:.4f} % (sigma {row['rms_sigma_pct']:.3f} %)  "
                       f"{'pass' if row['pass'] else 'FAIL'}", file=sys.stderr, flush=True)
