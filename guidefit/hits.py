@@ -804,6 +804,8 @@ def _stored_hits(run: Run, s: HitSettings, length: int) -> Iterator[Hit]:
     fi = run.force_index
     pre = run.pretrigger_samples
     n_hits = run.n_hits_stored
+    if n_hits == 0:
+        return
     with open_reader(run) as reader:
         cache = None
         if n_hits * length * run.n_channels * 8 <= _CACHE_BYTES:
