@@ -95,9 +95,9 @@ __all__ = [
 CHUNK_SAMPLES = 1_000_000
 """Samples of the force channel read per step when scanning a ``signals`` run."""
 
-_READ_BYTES = 64 << 20
+_READ_BYTES = 16 << 20
 """Bound on one read (all channels, as float64) when scanning the force of stored hits."""
-_CACHE_BYTES = 32 << 20
+_CACHE_BYTES = 16 << 20
 """Stored hits up to this size in float64 are read once and kept between the two passes."""
 
 DEFAULT_PRETRIGGER_S = 1e-3
