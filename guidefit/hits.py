@@ -10,7 +10,12 @@ record (layout ``signals``). :func:`iter_hits` turns both into a stream of
   through the trigger level, at most one per hold-off time. Each hit's record
   starts ``pretrigger`` samples before its trigger; every record of a run has
   the same length (see :class:`HitSettings` for how it is chosen). Then each
-  record is read with :func:`guidefit.recording.read_block`.
+  record is read.
+
+The file stays open for the whole iteration
+(:func:`guidefit.recording.open_reader`). For ``hits``, the force of every
+stored hit is read first (for the run's median peak, used by ``too_weak``) in
+blocks of at most 16 MB, or the whole run is read once if it is that small.
 
 Every record is checked; a hit that fails a check is yielded with
 ``accepted=False``, ``data=None`` and a reason, never dropped. The checks, in

@@ -14,8 +14,10 @@ whole file against the contract and returns a :class:`Recording` that holds
 only metadata: the samples stay on disk and are read in slices by
 :func:`read_block` (signals layout) and :func:`read_hit` (hits layout), which
 open the file for each call, so a 4 GB recording is processed in bounded
-memory. Both return float64 arrays in SI units (N, m/s^2): a channel stored in
-``g`` is multiplied by 9.80665 on read (:attr:`Channel.scale_to_si`).
+memory; :func:`open_reader` keeps the file open for many such reads (what
+:func:`guidefit.hits.iter_hits` uses). Both return float64 arrays in SI units
+(N, m/s^2): a channel stored in ``g`` is multiplied by 9.80665 on read
+(:attr:`Channel.scale_to_si`).
 Non-finite samples (NaN, Inf) are *not* a reading error; they are found per
 hit by :mod:`guidefit.hits`.
 
