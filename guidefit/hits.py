@@ -15,7 +15,7 @@ record (layout ``signals``). :func:`iter_hits` turns both into a stream of
 The file stays open for the whole iteration
 (:func:`guidefit.recording.open_reader`). For ``hits``, the force of every
 stored hit is read first (for the run's median peak, used by ``too_weak``) in
-blocks of at most 16 MB, or the whole run is read once if it is that small.
+blocks of at most 8 MB, or the whole run is read once if it is that small.
 
 Every record is checked; a hit that fails a check is yielded with
 ``accepted=False``, ``data=None`` and a reason, never dropped. The checks, in
@@ -100,9 +100,9 @@ __all__ = [
 CHUNK_SAMPLES = 1_000_000
 """Samples of the force channel read per step when scanning a ``signals`` run."""
 
-_READ_BYTES = 16 << 20
-"""Bound on one read (all channels, as float64) when scanning the force of stored hits."""
-_CACHE_BYTES = 16 << 20
+_READ_BYTES = 8 << 20
+"""Bound on one read (all channels, as float64; at least one hit) when scanning the force of stored hits."""
+_CACHE_BYTES = 8 << 20
 """Stored hits up to this size in float64 are read once and kept between the two passes."""
 
 DEFAULT_PRETRIGGER_S = 1e-3
