@@ -9,9 +9,21 @@ identification that failed on valid input). The input errors also subclass
 
 
 class GuidefitError(Exception):
-    """Base of every guidefit error; ``str(err)`` is a single line."""
+    """Base of every guidefit error; ``str(err)`` is a single line.
+
+    Line breaks that reach a message from the input (a channel name with a
+    newline, say) are shown escaped, so the promise holds whatever the file.
+
+    >>> str(RecordingError("channel 'a\\nb' not recognised"))
+    "channel 'a\\\\nb' not recognised"
+    """
 
     exit_code = 2
+
+    def __init__(self, *args):
+        if args and isinstance(args[0], str):
+            args = (args[0].replace("\r", "\\r").replace("\n", "\\n"), *args[1:])
+        super().__init__(*args)
 
 
 class GuideError(GuidefitError, ValueError):
