@@ -1501,6 +1501,8 @@ def explain_modes(measured, guide, sensors=(), force_levels=(), candidates=None,
                 "default_shape_std_pct": 100 * DEFAULT_SHAPE_STD, "accept_p_value": ACCEPT_P_VALUE,
                 "equal_bic": EQUAL_BIC, "unpaired_penalty_sigma": UNPAIRED_PENALTY, "score": "BIC = chi2 + k ln n",
         "force_level_floor_pct": 100 * FORCE_LEVEL_FLOOR,
+                "estimated_shape_std_floor_pct": 100 * ESTIMATED_SHAPE_STD_FLOOR,
+                "amplitude_model_form": AMPLITUDE_MODEL_FORM,
                 "model_evaluations": ctx.n_eval}
     result = Explanation(
         verdict=verdict, guide=guide.name, error_before=err_before, error_after=err_after,
