@@ -25,7 +25,7 @@ Run from the repository root::
 
     python benchmarks/explain_recordings.py              # one seed, the table of docs/explain.md
     python benchmarks/explain_recordings.py --seeds 3    # + pass counts over seeds 0-2
-    python benchmarks/explain_recordings.py --quick      # fewer hits, no slow nonlinear case
+    python benchmarks/explain_recordings.py --quick      # 4 hits per run (amplitude_dependence keeps 9)
     python benchmarks/explain_recordings.py --case amplitude --json rows.json --keep /tmp/rec
     python benchmarks/explain_recordings.py --noise 1e-3  # ten times the default sensor noise
 
