@@ -392,6 +392,25 @@ def _jackknife(frf, modes) -> list[tuple[float | None, float | None]]:
     return out
 
 
+def _with_jackknife(modes: list, frf_by_run: dict) -> list:
+    """The selected joint modes (vertical, roll_low) with the hit-group jackknife in their std.
+
+    The jackknife's eight refits per mode are most of identify's time, so it
+    runs for the modes behind the joint parameters only, after selection;
+    the other modes keep the curve fit's own standard error.
+    """
+    from dataclasses import replace
+
+    out = []
+    for m in modes:
+        if m.label in JOINT_LABELS.values() and m.fit is not None:
+            (jk_f, jk_z), = _jackknife(frf_by_run[m.run], [m.fit])
+            m = replace(m, frequency_std_hz=_combine(jk_f, m.fit.frequency_std_hz),
+                        damping_std=_combine(jk_z, m.fit.damping_std))
+        out.append(m)
+    return out
+
+
 def _fit_run(run, frf, guide, model, settings, warnings: list) -> list[IdentifiedMode]:
     from guidefit import frf as frf_mod
     from guidefit import modes as modes_mod
@@ -415,12 +434,11 @@ def _fit_run(run, frf, guide, model, settings, warnings: list) -> list[Identifie
         warnings.append(f"run '{run.name}': no mode found between {band[0]:.0f} and {band[1]:.0f} Hz ({exc})")
         return []
     fitted = sorted(fitted, key=lambda m: m.frequency_hz)
-    stds = _jackknife(frf, fitted) if settings.jackknife else [(None, None)] * len(fitted)
     sensors = sensor_matrix(frf_channels(run, frf))
     mass = vib.carriage_mass_matrix(vib.model_from_guide(guide))
     tau = getattr(frf, "exp_window_tau_s", None)
     candidates = []
-    for mode, (jk_f, jk_z) in zip(fitted, stds):
+    for mode in fitted:
         f_n, zeta = mode.frequency_hz, mode.damping_ratio
         if tau:
             f_n, zeta = frf_mod.exponential_window_damping_correction(zeta, f_n, tau)
@@ -430,8 +448,7 @@ def _fit_run(run, frf, guide, model, settings, warnings: list) -> list[Identifie
         q = q / norm
         energy = energy_shares(q, mass)
         contrib = np.abs(q * (mass @ q))
-        f_std = _combine(jk_f, mode.frequency_std_hz)
-        z_std = _combine(jk_z, mode.damping_std)
+        f_std, z_std = mode.frequency_std_hz, mode.damping_std
         candidates.append({
             "mode": mode, "frequency_hz": f_n, "damping_ratio": zeta, "q": q, "energy": energy,
             "u_energy": contrib[0], "phi_energy": contrib[4], "shape": shape,
@@ -670,6 +687,8 @@ def identify(path, guide=None, settings: IdentifySettings | None = None) -> Iden
         raise IdentificationError(f"{path}: no run gave an FRF ({'; '.join(warnings) or 'no hits'})")
     axes = {r.name: int(np.argmax(np.abs(r.excitation_direction))) for r in runs}
     modes, extras, missing = _select(all_modes, model, warnings, axes)
+    if settings.jackknife:
+        modes = _with_jackknife(modes, {r.name: r.frf for r in runs})
     joint = {k: next((m for m in modes if m.label == lab), None) for k, lab in JOINT_LABELS.items()}
     if joint["V"] is None and joint["H"] is None:
         raise IdentificationError(f"{path}: neither the vertical nor the horizontal joint mode was found")
