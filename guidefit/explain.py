@@ -151,7 +151,6 @@ The paper's own measurement (f_V = 3450 Hz, f_H = 1075 Hz):
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -1823,29 +1822,13 @@ def read_modes_json(path):
     [('vertical', 3450.0), ('roll_low', 1075.0)]
     >>> os.remove(fh.name)
     """
+    from guidefit.jsonio import read_json_documents
+
     p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise RecordingError(f"{p}: no such file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise RecordingError(f"{p}: cannot read ({exc.__class__.__name__})") from None
-    if not text.strip():
-        raise RecordingError(f"{p}: empty file")
-    try:
-        obj = json.loads(text)
-    except json.JSONDecodeError:
-        objs = []
-        for n, line in enumerate(text.splitlines(), start=1):
-            if not line.strip():
-                continue
-            try:
-                objs.append(json.loads(line))
-            except json.JSONDecodeError as exc:
-                raise RecordingError(f"{p}: line {n}: not JSON ({exc.msg})") from None
-        if len(objs) != 1:
-            raise RecordingError(f"{p}: {len(objs)} JSON lines (one per recording); explain takes one") from None
-        obj = objs[0]
+    docs = read_json_documents(p)
+    if len(docs) != 1:
+        raise RecordingError(f"{p}: {len(docs)} JSON lines (one per recording); explain takes one")
+    obj = docs[0]
     return modes_from_result(obj, str(p))
 
 

@@ -53,29 +53,12 @@ class SpringDamper:
 
 def read_results(path) -> list[dict]:
     """Results of ``identify --json`` (JSON Lines, or one JSON object / list)."""
-    try:
-        with open(path, encoding="utf-8") as handle:
-            text = handle.read()
-    except OSError as exc:
-        raise RecordingError(f"{path}: cannot read ({exc.strerror})") from None
-    except UnicodeDecodeError:
-        raise RecordingError(f"{path}: not a text file of identify results") from None
-    text = text.strip()
-    if not text:
-        raise RecordingError(f"{path}: empty; expected the JSON output of 'guidefit identify --json'")
-    try:
-        data = json.loads(text)
-        items = data if isinstance(data, list) else [data]
-    except json.JSONDecodeError:
-        items = []
-        for number, line in enumerate(text.splitlines(), start=1):
-            if not line.strip():
-                continue
-            try:
-                items.append(json.loads(line))
-            except json.JSONDecodeError as exc:
-                raise RecordingError(f"{path}: line {number}: not JSON ({exc.msg})") from None
-    return items
+    from guidefit.jsonio import read_json_documents
+
+    docs = read_json_documents(path)
+    if len(docs) == 1 and isinstance(docs[0], list):
+        return docs[0]
+    return docs
 
 
 def _value(result: dict, name: str, where: str) -> float:
