@@ -162,14 +162,9 @@ def parse_fault(text: str) -> Fault:
     >>> parse_fault("double_hit:delay_s=0.002")
     Fault(name='double_hit', parameters={'hit': 1, 'delay_s': 0.002, 'ratio': 0.4, 'run': 'all'})
     """
-    name, _, body = text.partition(":")
-    params = {}
-    for item in filter(None, (s.strip() for s in body.split(","))):
-        key, eq, value = item.partition("=")
-        if not eq:
-            raise ModelError(f"fault '{text}': expected param=value, got '{item}'")
-        params[key.strip()] = value.strip()
-    return make_fault(name.strip(), params)
+    from guidefit.model.effects import split_named_parameters
+
+    return make_fault(*split_named_parameters(text, "fault"))
 
 
 def make_fault(name: str, parameters: dict | None = None) -> Fault:

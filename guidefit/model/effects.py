@@ -208,21 +208,29 @@ EFFECTS: dict[str, EffectInfo] = {
 }
 
 
+def split_named_parameters(text: str, kind: str) -> tuple[str, dict]:
+    """``NAME[:param=value,...]`` -> (name, {param: value text}); the syntax of ``--effect`` and ``--fault``.
+
+    >>> split_named_parameters("added_mass:mass_kg=0.04, at=AB", "effect")
+    ('added_mass', {'mass_kg': '0.04', 'at': 'AB'})
+    """
+    name, _, body = text.partition(":")
+    params: dict = {}
+    for item in filter(None, (s.strip() for s in body.split(","))):
+        key, eq, value = item.partition("=")
+        if not eq:
+            raise ModelError(f"{kind} '{text}': expected param=value, got '{item}'")
+        params[key.strip()] = value.strip()
+    return name.strip(), params
+
+
 def parse_effect(text: str) -> Effect:
     """Parse ``NAME:param=value,param=value`` (the ``--effect`` syntax) into a checked Effect.
 
     >>> parse_effect("added_mass:mass_kg=0.04,at=AB")
     Effect(name='added_mass', parameters={'mass_kg': 0.04, 'at': 'AB'})
     """
-    name, _, body = text.partition(":")
-    name = name.strip()
-    params: dict = {}
-    for item in filter(None, (s.strip() for s in body.split(","))):
-        key, eq, value = item.partition("=")
-        if not eq:
-            raise ModelError(f"effect '{text}': expected param=value, got '{item}'")
-        params[key.strip()] = value.strip()
-    return make_effect(name, params)
+    return make_effect(*split_named_parameters(text, "effect"))
 
 
 def make_effect(name: str, parameters: dict) -> Effect:
