@@ -346,15 +346,29 @@ def _narrow_band(mode) -> tuple[float, float]:
     return mode.frequency_hz - half_width, mode.frequency_hz + half_width
 
 
-def _refit_one(frf, mode, max_nfev: int = 20):
+def _refit_one(frf, mode, max_nfev: int = 20, uncertainty: bool = True):
     """Refit one mode in its narrow band, starting from ``mode`` (None when the fit fails)."""
     from guidefit import modes as modes_mod
 
     try:
         return modes_mod.fit_modes(frf.frequency_hz, frf.H, _narrow_band(mode), 1, initial=[mode],
-                                   max_nfev=max_nfev)[0]
+                                   max_nfev=max_nfev, uncertainty=uncertainty)[0]
     except (IdentificationError, ValueError, np.linalg.LinAlgError):
         return None
+
+
+def _band_of(frf, f_lo_hz: float, f_hi_hz: float):
+    """The FrfSet restricted to the bins in [f_lo_hz, f_hi_hz] (group sums included).
+
+    The jackknife replicates then re-estimate a few hundred bins instead of
+    the whole spectrum.
+    """
+    from dataclasses import replace
+
+    sel = (frf.frequency_hz >= f_lo_hz) & (frf.frequency_hz <= f_hi_hz)
+    sums = {k: (v if k == "n_hits" else np.asarray(v)[:, sel]) for k, v in frf.group_sums.items()}
+    return replace(frf, frequency_hz=frf.frequency_hz[sel], H=frf.H[sel],
+                   coherence=frf.coherence[sel], group_sums=sums)
 
 
 def _jackknife(frf, modes) -> list[tuple[float | None, float | None]]:
@@ -371,11 +385,13 @@ def _jackknife(frf, modes) -> list[tuple[float | None, float | None]]:
     if not modes or not hasattr(frf, "leave_one_group_out") or getattr(frf, "n_groups", 0) < 3:
         return [(None, None)] * len(modes)
     fits: list[list] = [[] for _ in modes]
+    lo = min(_narrow_band(m)[0] for m in modes)
+    hi = max(_narrow_band(m)[1] for m in modes)
     with _w.catch_warnings():
         _w.simplefilter("ignore")
-        for sub in frf.leave_one_group_out():
+        for sub in _band_of(frf, lo, hi).leave_one_group_out():
             for k, mode in enumerate(modes):
-                r = _refit_one(sub, mode)
+                r = _refit_one(sub, mode, uncertainty=False)
                 if r is not None:
                     fits[k].append(r)
             del sub
