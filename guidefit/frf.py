@@ -142,7 +142,7 @@ TAIL_FRACTION = 0.05
 _BLOCK_BYTES = 64 * 2**20
 _MAX_BLOCK_HITS = 4
 #: Frequency bins per chunk of the spectral products (keeps temporaries in cache).
-_CHUNK_BINS = 4096
+_CHUNK_BINS = 16384
 
 
 # --------------------------------------------------------------------------- estimators
@@ -691,11 +691,18 @@ def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windo
     ``windows(block)`` gets the first block of raw records as (n, C, n_samples)
     rows and returns ``(w_force, w_response)``; every record is then multiplied
     by them while being copied, transposed, into the FFT input buffer (FFTs along
-    contiguous rows are faster than along axis 0 of (n_samples, C) records).
-    The spectral products of one block run on a helper thread while the main
-    thread windows and transforms the next one (scipy's FFT and numpy's ufuncs
-    release the GIL). Returns ``None`` when there is no record.
+    contiguous rows are faster than along axis 0 of (n_samples, C) records; a
+    record that is the transpose of contiguous rows, as hits from
+    :func:`guidefit.hits.iter_hits` give, is multiplied row by row).
+
+    The main thread pulls the records from ``items`` (for hits: reads and
+    checks them) and windows them into a block buffer; ``workers`` threads
+    transform the blocks and add their spectra to the sums (``scipy.fft`` and
+    numpy's ufuncs release the GIL, so all of this overlaps). The sums are
+    added block after block in order, so the result does not depend on the
+    threads' timing. Returns ``None`` when there is no record.
     """
+    import threading
     from concurrent.futures import ThreadPoolExecutor
 
     import scipy.fft
@@ -708,11 +715,33 @@ def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windo
     fi = force_index
     acc = _Accumulator(n, c, fi, n_groups, workers)
     block = _block_size(n, c)
-    buf = np.empty((block, c, n))
+    n_bufs = 1 if workers <= 1 else workers + 1  # one being filled, one per thread
+    bufs = [np.empty((block, c, n)) for _ in range(n_bufs)]
+    free = [threading.Event() for _ in range(n_bufs)]  # set: the buffer may be refilled
+    for event in free:
+        event.set()
     window_t = None
-    with ThreadPoolExecutor(max_workers=1) if workers > 1 else _NullExecutor() as pool:
-        future = None
+
+    def transform(turn: int, k: int, i0: int, added_before: threading.Event | None,
+                  added: threading.Event) -> None:
+        try:
+            Z = scipy.fft.rfft(bufs[turn][:k], axis=-1, workers=1)
+        finally:
+            free[turn].set()
+        try:
+            if added_before is not None:
+                added_before.wait()
+            acc.add(Z, i0)
+        finally:
+            added.set()
+
+    with ThreadPoolExecutor(max_workers=workers) if workers > 1 else _NullExecutor() as pool:
+        futures = []
+        added = None
+        turn = 0
         while True:
+            free[turn].wait()
+            buf = bufs[turn]
             k = 0
             while k < block:
                 if item is None:
@@ -733,14 +762,15 @@ def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windo
                 window_t[:] = np.asarray(w_resp, dtype=float)
                 window_t[fi] = np.asarray(w_force, dtype=float)
                 buf[:k] *= window_t
-            Z = scipy.fft.rfft(buf[:k], axis=-1, workers=workers)
-            if future is not None:
-                future.result()
-            future = pool.submit(acc.add, Z, acc.n_hits)
+            free[turn].clear()
+            added_before, added = added, threading.Event()
+            futures = [f for f in futures if not f.done()]
+            futures.append(pool.submit(transform, turn, k, acc.n_hits, added_before, added))
             acc.n_hits += k
+            turn = (turn + 1) % n_bufs
             if k < block:
                 break
-        if future is not None:
+        for future in futures:
             future.result()
     return acc
 
@@ -761,6 +791,9 @@ class _NullExecutor:
 
             def result(self):
                 return self.value
+
+            def done(self):
+                return True
 
         return _Done(fn(*args))
 
@@ -1164,7 +1197,10 @@ def compute_frf(
     def accepted() -> Iterator[tuple[str, np.ndarray]]:
         for k, hit in enumerate(hits):
             label = str(getattr(hit, "index", k))
-            if hit.accepted and hit.data is not None:
+            rows = getattr(hit, "_rows", None)  # stored hits from iter_hits: data.T, contiguous
+            if hit.accepted and rows is not None:
+                yield label, rows.T
+            elif hit.accepted and hit.data is not None:
                 yield label, hit.data
             else:
                 rejected[getattr(hit, "reason", None) or "rejected"] += 1

@@ -303,6 +303,36 @@ class Hit:
         object.__setattr__(self, "codes", tuple(self.codes))
 
 
+class _RowsHit(Hit):
+    """An accepted Hit that holds its samples as channel rows (C, n).
+
+    ``data`` (n, C) is made from the rows on first access (the checks and the
+    FFT work on rows; :func:`guidefit.frf.compute_frf` uses ``_rows`` and
+    never needs ``data``). The values are the same either way.
+    """
+
+    @property
+    def data(self):
+        data = self.__dict__.get("_data")
+        if data is None and self.__dict__.get("_rows") is not None:
+            data = np.ascontiguousarray(self._rows.T)
+            data.setflags(write=False)
+            object.__setattr__(self, "_data", data)
+        return data
+
+    @data.setter
+    def data(self, value):  # the dataclass __init__ sets data; rows come after
+        self.__dict__["_data"] = value
+
+
+def _hit_with_rows(run: str, index: int, rows: np.ndarray, peak, trigger, metrics) -> Hit:
+    """An accepted stored hit whose data are ``rows.T`` (``rows`` then owned by the Hit)."""
+    rows.setflags(write=False)
+    hit = _RowsHit(run, index, 0, None, peak, True, None, trigger, (), metrics)
+    object.__setattr__(hit, "_rows", rows)
+    return hit
+
+
 _METRICS = ("pulse_width_s", "second_impact_ratio", "end_ratio")
 
 
@@ -414,24 +444,52 @@ def _check(
     return Hit(run.name, index, start_sample, data, peak, True, None, trigger, (), metrics)
 
 
+def _check_raw(run, raw, scale, settings, index, pretrigger_samples, median_peak_n, force_base) -> Hit:
+    """Assess a stored hit read as stored (``raw``: (n, C), file units and dtype).
+
+    The samples are converted once, to float64 SI channel rows (C, n): the
+    layout the checks and the FFT work on. An accepted hit keeps them (its
+    ``data`` is their transpose, made if asked for). ``scale`` is
+    ``run.scale_to_si``, or None when every factor is 1; the values are those
+    of :func:`guidefit.recording.read_hit`.
+    """
+    rows = np.empty(raw.shape[::-1])
+    np.copyto(rows, raw.T)
+    if scale is not None:
+        rows *= scale[:, None]
+    codes, reasons, peak, trigger, metrics = _assess_rows(
+        rows, run, settings, pretrigger_samples, median_peak_n, force_base
+    )
+    if codes:
+        return Hit(
+            run.name, index, 0, None, peak, False, "; ".join(reasons), trigger, codes, metrics
+        )
+    return _hit_with_rows(run.name, index, rows, peak, trigger, metrics)
+
+
 def _assess(data, run: Run, s: HitSettings, pre: int | None, median_peak, force_base=None):
-    """(codes, reasons, signed peak, pretrigger, metrics) of one record.
+    """(codes, reasons, signed peak, pretrigger, metrics) of one record ``data`` (n, C).
 
     ``force_base``, if given, is the force baseline already computed from the
     same samples (the median of the pre-trigger or of the whole force).
     """
+    # one contiguous row per channel: cheaper passes
+    return _assess_rows(np.ascontiguousarray(data.T), run, s, pre, median_peak, force_base)
+
+
+def _assess_rows(columns, run: Run, s: HitSettings, pre: int | None, median_peak, force_base=None):
+    """:func:`_assess` of the channel rows ``columns`` (C, n), float64 SI."""
     names = run.channel_names
     fs = run.sample_rate_hz
     fi = run.force_index
-    n = data.shape[0]
+    n = columns.shape[1]
     metrics = dict.fromkeys(_METRICS, math.nan)
-    columns = np.ascontiguousarray(data.T)  # one contiguous row per channel: cheaper passes
     # max and min of each channel: NaN if it holds a NaN, +-Inf if an Inf
     tops, bottoms = columns.max(axis=1), columns.min(axis=1)
     if not (np.isfinite(tops).all() and np.isfinite(bottoms).all()):
-        finite = np.isfinite(data)
-        bad = [names[c] for c in np.flatnonzero(~finite.all(axis=0))]
-        force = data[:, fi][finite[:, fi]]
+        finite = np.isfinite(columns)
+        bad = [names[c] for c in np.flatnonzero(~finite.all(axis=1))]
+        force = columns[fi][finite[fi]]
         peak = _signed_extreme(force - np.median(force)) if force.size else math.nan
         count = int((~finite).sum())
         return (
@@ -497,7 +555,7 @@ def _assess(data, run: Run, s: HitSettings, pre: int | None, median_peak, force_
         reasons.append(f"double_hit: {double}")
 
     clipped = []
-    for c in range(data.shape[1]):
+    for c in range(columns.shape[0]):
         flat = _flat_top(columns[c], s.clip_min_run, float(tops[c]), float(bottoms[c]))
         if flat is not None:
             m, value = flat
@@ -553,7 +611,13 @@ def _median(x: np.ndarray):
     """
     n = x.size
     if n < 8192:
-        return np.median(x)
+        if n == 0:
+            return np.median(x)
+        k = n // 2
+        if n % 2:
+            return np.partition(x, k)[k]
+        part = np.partition(x, (k - 1, k))
+        return (part[k - 1] + part[k]) / 2  # as np.median: the mean of the middle two
     k = n // 2
     ranks = (k - 1, k) if n % 2 == 0 else (k,)
     sample = x[:: n // 4096]
@@ -583,14 +647,11 @@ def _double_hit(
     fc: np.ndarray, p: int, peak: float, fs: float, s: HitSettings, metrics: dict
 ) -> str:
     """Describe a second impact in the (baseline-free, positive-peak) force, or ''."""
-    above = fc > s.pulse_end_fraction * peak
-    edges = np.diff(above.astype(np.int8))
-    starts = np.flatnonzero(edges == 1) + 1
-    ends = np.flatnonzero(edges == -1) + 1
-    if above[0]:
-        starts = np.r_[0, starts]
-    if above[-1]:
-        ends = np.r_[ends, fc.size]
+    # segments of consecutive samples above the pulse-end level: [starts, ends)
+    above = np.flatnonzero(fc > s.pulse_end_fraction * peak)  # holds p: peak > 0
+    gaps = np.flatnonzero(np.diff(above) > 1)
+    starts = np.concatenate((above[:1], above[gaps + 1]))
+    ends = np.concatenate((above[gaps], above[-1:])) + 1
     # between segments the force is below the pulse-end level, so a max from
     # one start to the next is the segment's own max
     seg_max = np.maximum.reduceat(fc, starts)
@@ -643,7 +704,18 @@ def _dropout(
     # channel by channel (responses first: they are rarely still)
     order = list(responses) + [c for c in range(len(columns)) if c not in responses]
     col = columns[order[0]]
-    still = np.flatnonzero(col[1:] == col[:-1])
+    same = col[1:] == col[:-1]  # step i: sample i + 1 equals sample i
+    # quick exit: a block needs min_len - 1 equal steps from the trigger on in
+    # this channel too; ``run[i]``: steps i .. i + width - 1 after the trigger all equal
+    run, width, need = same[trigger:].copy(), 1, min_len - 1
+    while width < need and run.size:
+        shift = min(width, need - width)
+        run[:-shift] &= run[shift:]
+        run[-shift:] = False
+        width += shift
+    if not run.any():
+        return None
+    still = np.flatnonzero(same)
     for c in order[1:]:
         if not still.size:
             break
@@ -804,43 +876,61 @@ def iter_hits(
 def _stored_hits(run: Run, s: HitSettings, length: int) -> Iterator[Hit]:
     """Two passes with the file open once: the force of every hit (for the
     run's median peak), then each hit in full. A run of at most
-    ``_CACHE_BYTES`` (as float64) is read only once; a larger one has its force
-    read in blocks of at most ``_READ_BYTES``."""
+    ``_CACHE_BYTES`` (as float64) is read only once; a larger one has its hits
+    read in blocks of at most ``_READ_BYTES`` (as float64) for the force.
+    Samples are read as stored and converted to float64 SI once, straight
+    into the layout each pass works on (see :func:`_check_raw`)."""
     fi = run.force_index
     pre = run.pretrigger_samples
     n_hits = run.n_hits_stored
     if n_hits == 0:
         return
+    scale = np.asarray(run.scale_to_si, dtype=np.float64)
+    scale = scale if np.any(scale != 1.0) else None
     with open_reader(run) as reader:
+        n_channels = run.n_channels
         cache = None
-        if n_hits * length * run.n_channels * 8 <= _CACHE_BYTES:
-            cache = reader.read_hits(0, n_hits, None, length)
-            blocks = [(0, cache[:, :, fi])]
+        if n_hits * length * n_channels * 8 <= _CACHE_BYTES:
+            cache = reader.read_hits_raw(0, n_hits, length)
+            blocks = [(0, cache)]
         else:
-            per = max(1, _READ_BYTES // (8 * length * run.n_channels))
+            per = min(n_hits, max(1, _READ_BYTES // (8 * length * n_channels)))
+            block = np.empty((per, length, n_channels), dtype=reader.dtype)
             blocks = (
-                (i0, reader.read_hits(i0, min(n_hits, i0 + per), [fi], length)[:, :, 0])
+                (i0, reader.read_hits_raw(i0, i1, length, out=block[: i1 - i0]))
                 for i0 in range(0, n_hits, per)
+                for i1 in [min(n_hits, i0 + per)]
             )
         peaks = []
         bases = [None] * n_hits  # force baseline of each all-finite force, reused below
-        for i0, forces in blocks:
-            for k, force in enumerate(forces):
+        forces = None
+        for i0, raw in blocks:
+            if forces is None or forces.shape[0] < raw.shape[0]:
+                forces = np.empty(raw.shape[:2])
+            force_rows = forces[: raw.shape[0]]
+            np.copyto(force_rows, raw[:, :, fi])
+            if scale is not None:
+                force_rows *= scale[fi]
+            for k, force in enumerate(force_rows):
+                hi, lo = float(force.max()), float(force.min())  # NaN if a NaN, +-Inf if an Inf
+                if math.isfinite(hi) and math.isfinite(lo):
+                    median = _median(force[: pre - 2] if pre is not None and pre >= 16 else force)
+                    bases[i0 + k] = median
+                    # max |force - median| from the extremes: rounding is monotone
+                    hi, lo = hi - median, lo - median
+                    peaks.append(abs(hi if hi >= -lo else lo))
+                    continue
                 finite = np.isfinite(force)
                 quiet = finite[: pre - 2] if pre is not None and pre >= 16 else finite
                 base = force[: quiet.size][quiet]
                 if base.size:
-                    median = _median(base)
-                    if finite.all():
-                        bases[i0 + k] = median
-                    peaks.append(abs(_signed_extreme(force[finite] - median)))
+                    peaks.append(abs(_signed_extreme(force[finite] - _median(base))))
+        del forces
         median_peak = float(np.median(peaks)) if peaks else None
+        one = None if cache is not None else np.empty((1, length, n_channels), dtype=reader.dtype)
         for i in range(n_hits):
-            if cache is not None:
-                data = cache[i].copy()
-            else:
-                data = reader.read_hits(i, i + 1, None, length)[0]
-            yield _check(run, data, s, i, 0, pre, median_peak, bases[i])
+            raw = cache[i] if cache is not None else reader.read_hits_raw(i, i + 1, length, out=one)[0]
+            yield _check_raw(run, raw, scale, s, i, pre, median_peak, bases[i])
 
 
 def _force_stats(run: Run, chunk: int, reader) -> tuple[float, float, float]:

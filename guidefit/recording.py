@@ -1432,6 +1432,75 @@ class RunReader:
             raw = self._raw((slice(int(first), int(last)), rows, cols))
         return _to_si(raw, reorder, scale)
 
+    def read_hits_raw(
+        self, first: int, last: int, n_samples: int | None = None, out: np.ndarray | None = None
+    ) -> np.ndarray:
+        """Stored hits ``first:last`` as stored: all channels, file units and dtype.
+
+        For callers that convert the samples themselves (e.g. straight into
+        channel rows): ``float64(raw) * run.scale_to_si`` is, value for value,
+        what :meth:`read_hits` returns.
+
+        Parameters
+        ----------
+        first, last, n_samples
+            As in :meth:`read_hits`.
+        out : ndarray, optional
+            C-contiguous array of shape (last - first, n_samples, n_channels)
+            to read into (reused between calls, it saves allocating and
+            first-touching a new array per read); its dtype should be the
+            file's (:attr:`dtype`).
+
+        Returns
+        -------
+        ndarray, shape (last - first, n_samples, n_channels)
+            ``out`` if given; else a new array, or a read-only view of
+            in-memory samples.
+        """
+        run = self._run
+        if run.layout != "hits":
+            raise ValueError(f"run '{run.name}' has layout '{run.layout}'; read it with read_block")
+        if not (
+            isinstance(first, (int, np.integer))
+            and isinstance(last, (int, np.integer))
+            and 0 <= first < last <= run.n_hits_stored
+        ):
+            raise ValueError(
+                f"first={first!r}, last={last!r}: expected 0 <= first < last <= {run.n_hits_stored} (run '{run.name}')"
+            )
+        n = run.n_samples if n_samples is None else int(n_samples)
+        if not 0 < n <= run.n_samples:
+            raise ValueError(f"n_samples={n_samples!r}: expected 1..{run.n_samples} (run '{run.name}')")
+        rows = slice(None) if n == run.n_samples else slice(0, n)
+        index = (slice(int(first), int(last)), rows)
+        if out is None:
+            raw = self._raw(index)
+            if self._ds is None:  # a view of the in-memory samples: read-only
+                raw = np.asarray(raw).view()
+                raw.flags.writeable = False
+            return raw
+        if out.shape != (int(last) - int(first), n, run.n_channels):
+            raise ValueError(
+                f"out has shape {out.shape}; expected {(int(last) - int(first), n, run.n_channels)}"
+            )
+        if self._ds is None:
+            np.copyto(out, self._raw(index))
+            return out
+        try:
+            self._ds.read_direct(out, source_sel=index)
+        except (OSError, KeyError, RuntimeError, ValueError, TypeError) as exc:
+            raise RecordingError(
+                f"{run.file or run.source.path}: run '{run.name}': cannot read samples ({_first_line(exc)})"
+            ) from None
+        return out
+
+    @property
+    def dtype(self) -> np.dtype:
+        """dtype of the stored samples."""
+        if self._ds is not None:
+            return self._ds.dtype
+        return np.asarray(self._run.source.data).dtype
+
 
 @contextlib.contextmanager
 def open_reader(run: Run) -> Iterator[RunReader]:
