@@ -138,9 +138,13 @@ FORCE_WINDOW_PULSES_AFTER = 4.0
 FORCE_TAPER_FRACTION = 0.2
 #: Tail of the record (fraction of its length) whose level sets the exponential window.
 TAIL_FRACTION = 0.05
+#: Default windows are chosen from the first (up to) this many records, at most
+#: ``_WINDOW_BYTES`` of them (as float64), at least one.
+_WINDOW_HITS = 4
+_WINDOW_BYTES = 64 * 2**20
 #: Hits per FFT call are limited so that one block of input stays below this size.
-_BLOCK_BYTES = 64 * 2**20
-_MAX_BLOCK_HITS = 4
+_BLOCK_BYTES = 16 * 2**20
+_MAX_BLOCK_HITS = 2
 #: Frequency bins per chunk of the spectral products (keeps temporaries in cache).
 _CHUNK_BINS = 16384
 
@@ -688,12 +692,12 @@ def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windo
                 n_groups: int, workers: int) -> _Accumulator | None:
     """Window, FFT and accumulate all records, a few hits per FFT call.
 
-    ``windows(block)`` gets the first block of raw records as (n, C, n_samples)
-    rows and returns ``(w_force, w_response)``; every record is then multiplied
-    by them while being copied, transposed, into the FFT input buffer (FFTs along
-    contiguous rows are faster than along axis 0 of (n_samples, C) records; a
-    record that is the transpose of contiguous rows, as hits from
-    :func:`guidefit.hits.iter_hits` give, is multiplied row by row).
+    ``windows(first)`` gets the first (up to ``_WINDOW_HITS``) raw records as
+    (hits, C, n_samples) rows and returns ``(w_force, w_response)``. Every
+    record is multiplied by them while being copied, transposed, into a block
+    buffer (FFTs along contiguous rows are faster than along axis 0 of
+    (n_samples, C) records; a record that is the transpose of contiguous rows,
+    as hits from :func:`guidefit.hits.iter_hits` give, is multiplied row by row).
 
     The main thread pulls the records from ``items`` (for hits: reads and
     checks them) and windows them into a block buffer; ``workers`` threads
@@ -708,19 +712,62 @@ def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windo
     import scipy.fft
 
     source = iter(items)
-    item = next(source, None)
-    if item is None:
+    first = None  # the first records, (hits, C, n); in the block buffers when they fit
+    k = 0
+    for _, record in source:
+        if first is None:
+            n, c = record.shape
+            n_first = max(1, min(_WINDOW_HITS, _WINDOW_BYTES // (8 * n * c)))
+            block = _block_size(n, c)
+            n_bufs = 1 if workers <= 1 else workers + 1  # one being filled, one per thread
+            space = np.empty((max(n_bufs * block, n_first), c, n))
+            first = space[:n_first]
+        np.copyto(first[k], record.T)
+        k += 1
+        if k == n_first:
+            break
+    if first is None:
         return None
-    n, c = item[1].shape
+    del record
+    first = first[:k]
     fi = force_index
-    acc = _Accumulator(n, c, fi, n_groups, workers)
-    block = _block_size(n, c)
-    n_bufs = 1 if workers <= 1 else workers + 1  # one being filled, one per thread
-    bufs = [np.empty((block, c, n)) for _ in range(n_bufs)]
+    w_force, w_resp = windows(first)
+    window_t = np.empty((c, n))
+    window_t[:] = np.asarray(w_resp, dtype=float)
+    window_t[fi] = np.asarray(w_force, dtype=float)
+    first *= window_t
+    if space.shape[0] > n_bufs * block:  # the first records did not fit in the buffers
+        space = np.empty((n_bufs * block, c, n))
+    else:
+        first = None
+    bufs = [space[i * block:(i + 1) * block] for i in range(n_bufs)]
+    ready = k  # windowed first records not yet handed to a block
     free = [threading.Event() for _ in range(n_bufs)]  # set: the buffer may be refilled
     for event in free:
         event.set()
-    window_t = None
+    acc = _Accumulator(n, c, fi, n_groups, workers)
+
+    def fill(turn: int) -> int:
+        """Windowed records into ``bufs[turn]`` (block, C, n); how many."""
+        nonlocal ready, first
+        buf = bufs[turn]
+        k = 0
+        if ready:  # the first records: in place already, or copied from ``first``
+            k = min(block, ready)
+            if first is not None:
+                done = first.shape[0] - ready
+                np.copyto(buf[:k], first[done:done + k])
+            ready -= k
+            if not ready:
+                first = None
+        if k < block:
+            for _, record in source:
+                np.multiply(record.T, window_t, out=buf[k])
+                del record
+                k += 1
+                if k == block:
+                    break
+        return k
 
     def transform(turn: int, k: int, i0: int, added_before: threading.Event | None,
                   added: threading.Event) -> None:
@@ -741,27 +788,9 @@ def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windo
         turn = 0
         while True:
             free[turn].wait()
-            buf = bufs[turn]
-            k = 0
-            while k < block:
-                if item is None:
-                    item = next(source, None)
-                    if item is None:
-                        break
-                if window_t is None:
-                    np.copyto(buf[k], item[1].T)
-                else:
-                    np.multiply(item[1].T, window_t, out=buf[k])
-                item = None
-                k += 1
+            k = fill(turn)
             if k == 0:
                 break
-            if window_t is None:
-                w_force, w_resp = windows(buf[:k])
-                window_t = np.empty((c, n))
-                window_t[:] = np.asarray(w_resp, dtype=float)
-                window_t[fi] = np.asarray(w_force, dtype=float)
-                buf[:k] *= window_t
             free[turn].clear()
             added_before, added = added, threading.Event()
             futures = [f for f in futures if not f.done()]
@@ -1097,8 +1126,8 @@ def frf_from_records(
     ----------
     records : array_like (n_hits, n_samples, n_channels) or iterable of (n_samples, n_channels)
         Accepted hits, float SI (force in N, responses in m/s^2). An iterable is
-        consumed a few records at a time; only the first block (up to 4 hits) is
-        looked at to choose default windows.
+        consumed a few records at a time; only the first 4 (fewer if they
+        exceed 64 MB as float64) are looked at to choose default windows.
     sample_rate_hz : float
         Sample rate in Hz.
     force_index : int

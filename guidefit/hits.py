@@ -444,16 +444,17 @@ def _check(
     return Hit(run.name, index, start_sample, data, peak, True, None, trigger, (), metrics)
 
 
-def _check_raw(run, raw, scale, settings, index, pretrigger_samples, median_peak_n, force_base) -> Hit:
+def _check_raw(
+    run, raw, rows, scale, settings, index, pretrigger_samples, median_peak_n, force_base
+) -> Hit:
     """Assess a stored hit read as stored (``raw``: (n, C), file units and dtype).
 
-    The samples are converted once, to float64 SI channel rows (C, n): the
-    layout the checks and the FFT work on. An accepted hit keeps them (its
-    ``data`` is their transpose, made if asked for). ``scale`` is
+    The samples are converted once, to float64 SI channel rows in ``rows``
+    (C, n): the layout the checks and the FFT work on. An accepted hit keeps
+    them (its ``data`` is their transpose, made if asked for). ``scale`` is
     ``run.scale_to_si``, or None when every factor is 1; the values are those
     of :func:`guidefit.recording.read_hit`.
     """
-    rows = np.empty(raw.shape[::-1])
     np.copyto(rows, raw.T)
     if scale is not None:
         rows *= scale[:, None]
@@ -925,12 +926,31 @@ def _stored_hits(run: Run, s: HitSettings, length: int) -> Iterator[Hit]:
                 base = force[: quiet.size][quiet]
                 if base.size:
                     peaks.append(abs(_signed_extreme(force[finite] - _median(base))))
-        del forces
+        del forces, blocks, raw
         median_peak = float(np.median(peaks)) if peaks else None
         one = None if cache is not None else np.empty((1, length, n_channels), dtype=reader.dtype)
+        spare: list[np.ndarray] = []  # rows of earlier hits, reused once nothing else holds them
         for i in range(n_hits):
             raw = cache[i] if cache is not None else reader.read_hits_raw(i, i + 1, length, out=one)[0]
-            yield _check_raw(run, raw, scale, s, i, pre, median_peak, bases[i])
+            yield _check_raw(run, raw, _rows_buffer(spare, (n_channels, length)), scale, s, i,
+                             pre, median_peak, bases[i])
+
+
+def _rows_buffer(spare: list, shape: tuple[int, int]) -> np.ndarray:
+    """A float64 array of ``shape`` for a hit's rows: one of ``spare`` that only
+    ``spare`` still references (its Hit and every view of it are gone), else a
+    new one, kept in ``spare`` (at most 3). Reusing memory that is already
+    mapped saves first-touch page faults: a new 4 MB array costs about 1000."""
+    import sys
+
+    for rows in spare:
+        if sys.getrefcount(rows) == 3:  # ``spare``, ``rows`` and the argument
+            rows.setflags(write=True)
+            return rows
+    rows = np.empty(shape)
+    if len(spare) < 3:
+        spare.append(rows)
+    return rows
 
 
 def _force_stats(run: Run, chunk: int, reader) -> tuple[float, float, float]:
