@@ -513,9 +513,15 @@ def _assess_rows(columns, run: Run, s: HitSettings, pre: int | None, median_peak
             bases[c] = _median(col[quiet]) if quiet else _median(col)
         return bases[c]
 
-    # p = argmax |fc| (its first occurrence) from the extremes of fc
-    hi, lo = int(np.argmax(fc)), int(np.argmin(fc))
-    p = hi if fc[hi] > -fc[lo] else lo if fc[hi] < -fc[lo] else min(hi, lo)
+    # p = argmax |fc| (its first occurrence); max and min of fc from those of
+    # the force (rounding is monotone), so only the winning side is searched
+    top, bottom = tops[fi] - force_base, bottoms[fi] - force_base
+    if top > -bottom:
+        p = int(np.argmax(fc))
+    elif top < -bottom:
+        p = int(np.argmin(fc))
+    else:
+        p = min(int(np.argmax(fc)), int(np.argmin(fc)))
     peak = float(fc[p])
     if peak <= 0:
         if peak == 0:
@@ -587,8 +593,14 @@ def _assess_rows(columns, run: Run, s: HitSettings, pre: int | None, median_peak
         top = float(max(tops[c] - m, m - bottoms[c]))
         if top == 0 or n_end >= n:
             continue
-        rms_end = float(np.sqrt(np.mean((col[-n_end:] - m) ** 2)))
-        noise = float(np.sqrt(np.mean((col[quiet] - m) ** 2))) if quiet else 0.0
+        # RMS as sqrt(np.mean(x ** 2)): the same sum, divided by the count
+        end = col[-n_end:] - m
+        rms_end = math.sqrt(np.add.reduce(np.square(end, out=end)) / n_end)
+        if quiet:
+            start = col[quiet] - m
+            noise = math.sqrt(np.add.reduce(np.square(start, out=start)) / start.size)
+        else:
+            noise = 0.0
         ratio = rms_end * math.sqrt(2) / top
         worst = max(worst, ratio)
         if ratio > s.max_end_ratio and rms_end > 3 * noise:

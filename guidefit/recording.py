@@ -1333,9 +1333,10 @@ class RunReader:
     stored hits at once.
     """
 
-    def __init__(self, run: Run, dataset=None):
+    def __init__(self, run: Run, dataset=None, direct=None):
         self._run = run
         self._ds = dataset  # open h5py dataset, or None for in-memory samples
+        self._direct = direct  # low-level h5py DatasetID for read_hits_raw(out=...), or None
 
     @property
     def run(self) -> Run:
@@ -1486,8 +1487,15 @@ class RunReader:
         if self._ds is None:
             np.copyto(out, self._raw(index))
             return out
-        try:
-            self._ds.read_direct(out, source_sel=index)
+        if not out.flags.c_contiguous:
+            raise ValueError("out must be C-contiguous")
+        import h5py
+
+        try:  # h5py's low-level read: a hyperslab of whole hits straight into ``out``
+            dataset = self._direct if self._direct is not None else self._ds.id
+            selection = dataset.get_space()
+            selection.select_hyperslab((int(first), 0, 0), out.shape)
+            dataset.read(h5py.h5s.create_simple(out.shape), selection, out)
         except (OSError, KeyError, RuntimeError, ValueError, TypeError) as exc:
             raise RecordingError(
                 f"{run.file or run.source.path}: run '{run.name}': cannot read samples ({_first_line(exc)})"
@@ -1546,13 +1554,14 @@ def open_reader(run: Run) -> Iterator[RunReader]:
         f = h5py.File(source.path, "r")
         try:
             ds = f[source.dataset]
+            direct = None
             if run.layout == "hits" and ds.chunks is not None and ds.chunks[0] == 1:
                 # hits are read whole, so each chunk (part of one hit) is read
                 # once: without a chunk cache HDF5 reads it straight into the
                 # output array instead of through the cache (one copy less)
                 access = h5py.h5p.create(h5py.h5p.DATASET_ACCESS)
                 access.set_chunk_cache(0, 0, 1.0)
-                ds = h5py.Dataset(h5py.h5d.open(f.id, source.dataset.encode(), dapl=access))
+                direct = h5py.h5d.open(f.id, source.dataset.encode(), dapl=access)
         except BaseException:
             f.close()
             raise
@@ -1561,7 +1570,7 @@ def open_reader(run: Run) -> Iterator[RunReader]:
             f"{run.file or source.path}: run '{run.name}': cannot read samples ({_first_line(exc)})"
         ) from None
     try:
-        yield RunReader(run, ds)
+        yield RunReader(run, ds, direct)
     finally:
         f.close()
 

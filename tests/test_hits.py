@@ -795,3 +795,54 @@ def test_fast_median_is_numpy_median():
             x = np.sort(rng.standard_normal(n))[:: 1 if trial % 2 else -1].copy()
         got, want = hits_module._median(x), np.median(x)
         assert got == want and type(got) is type(want), (trial, n)
+
+
+def test_stored_hits_in_g_read_once_as_stored_equal_read_hit(tmp_path, monkeypatch):
+    """Stored hits are read as stored and converted to SI once (rows for the
+    checks, data on demand): the same values, peaks and decisions as the plain
+    reference reading ``read_hit``, for a channel stored in g, in both the
+    small-run (read once) and the block-read paths."""
+    rng = np.random.default_rng(11)
+    n, hits = 4000, 6
+    records = np.zeros((hits, n, 3), dtype=np.float32)
+    for i in range(hits):
+        records[i, :, 0] = half_sine(n, 200, 80.0 + 10 * i) + rng.normal(0, 0.01, n)
+        records[i, :, 1] = (ringing(n, 200, 30.0) + rng.normal(0, 0.01, n)) / 9.80665
+        records[i, :, 2] = ringing(n, 200, 20.0, f_hz=2100.0) + rng.normal(0, 0.01, n)
+    records[4, 2500:2600, 0] += half_sine(100, 0, 40.0)  # a double hit
+    run = RunData("vertical", FS, [0, -1, 0], NAMES, ["N", "g", "m/s^2"],
+                  [[0, 0, 0], [0.03, 0, 0.045], [-0.03, 0, 0.045]],
+                  [[0, -1, 0], [0, 1, 0], [0, 1, 0]], data=records, layout="hits",
+                  pretrigger_samples=200)
+    write_recording(tmp_path / "g.h5", run)
+    stored = read_recording(tmp_path / "g.h5").runs[0]
+    assert stored.channels[1].scale_to_si == 9.80665
+    want = _reference_stored_hits(stored, HitSettings(), n)
+    assert [w[4] for w in want] == [(), (), (), (), ("double_hit",), ()]
+    _assert_same_hits([_as_tuple(h) for h in iter_hits(stored)], want)
+    monkeypatch.setattr(hits_module, "_CACHE_BYTES", 0)
+    monkeypatch.setattr(hits_module, "_READ_BYTES", 4 * 8 * n * 3)  # blocks of 4 hits, 2 left
+    got = list(iter_hits(stored))
+    _assert_same_hits([_as_tuple(h) for h in got], want)
+    for hit in got:  # data is made on demand, once, read-only
+        if hit.accepted:
+            assert hit.data is hit.data
+            np.testing.assert_array_equal(hit.data, read_hit(stored, hit.index))
+
+
+def test_iter_hits_reuses_row_buffers_only_when_released(tmp_path):
+    """Hits kept by the caller keep their own samples."""
+    records = np.zeros((5, 2000, 3))
+    for i in range(5):
+        records[i, :, 0] = half_sine(2000, 100, 50.0 + i)
+        records[i, :, 1] = ringing(2000, 100, 10.0 + i)
+        records[i, :, 2] = ringing(2000, 100, 5.0 + i, f_hz=1800.0)
+    run = RunData("vertical", FS, [0, -1, 0], NAMES, ["N", "m/s^2", "m/s^2"],
+                  [[0, 0, 0], [0.03, 0, 0.045], [-0.03, 0, 0.045]],
+                  [[0, -1, 0], [0, 1, 0], [0, 1, 0]], data=records, layout="hits",
+                  pretrigger_samples=100)
+    write_recording(tmp_path / "keep.h5", run)
+    kept = list(iter_hits(read_recording(tmp_path / "keep.h5").runs[0]))
+    assert all(h.accepted for h in kept)
+    for i, hit in enumerate(kept):
+        np.testing.assert_array_equal(hit.data, records[i])
