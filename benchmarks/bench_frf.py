@@ -23,6 +23,9 @@ floor (float64)
 guidefit
     ``compute_frf(run, iter_hits(run))`` on ``read_recording(path)``: what
     ``identify`` and ``guidefit frf`` do (default windows, hit checks).
+guidefit, one thread
+    the same with ``compute_frf(..., workers=1)``: no FFT threads, everything
+    on the calling thread (what a machine without a free core gets).
 guidefit, no hit checks
     ``spectral_sums`` over the h5py float64 records (the FFT/accumulation core
     alone, no windows chosen, no quality checks).
@@ -121,6 +124,19 @@ def w_guidefit(path):
             "n_averages": frf.n_averages}
 
 
+def w_guidefit_one_thread(path):
+    from guidefit.frf import compute_frf
+    from guidefit.hits import iter_hits
+    from guidefit.recording import read_recording
+
+    t = time.perf_counter()
+    run = read_recording(path).runs[0]
+    frf = compute_frf(run, iter_hits(run), workers=1)
+    dt = time.perf_counter() - t
+    return {"seconds": dt, "n_samples": run.n_hits_stored * run.n_samples * run.n_channels,
+            "n_averages": frf.n_averages}
+
+
 def w_guidefit_core(path):
     from guidefit.frf import spectral_sums
 
@@ -189,6 +205,7 @@ WORKERS = {
     "floor32": w_floor32,
     "floor64": w_floor64,
     "guidefit": w_guidefit,
+    "guidefit1": w_guidefit_one_thread,
     "core": w_guidefit_core,
     "iter_hits": w_iter_hits,
     "naive": w_naive,
@@ -200,6 +217,7 @@ LABELS = {
     "floor32": "floor: h5py read + rfft, float32",
     "floor64": "floor: h5py read + rfft, float64",
     "guidefit": "**guidefit** compute_frf(iter_hits(read_recording))",
+    "guidefit1": "guidefit, one thread (compute_frf(..., workers=1))",
     "core": "guidefit spectral_sums only (h5py reads, no checks, no windows)",
     "iter_hits": "guidefit iter_hits only (read + hit checks, no FFT)",
     "naive": "naive per-hit scipy.signal welch + csd",
@@ -294,7 +312,8 @@ def main() -> None:
             with open(p, "rb") as fh:
                 while fh.read(1 << 24):
                     pass
-        names = ["imports", "floor32", "floor64", "guidefit", "core", "iter_hits", "naive", "pyfrf"]
+        names = ["imports", "floor32", "floor64", "guidefit", "guidefit1", "core", "iter_hits",
+                 "naive", "pyfrf"]
         if importlib.util.find_spec("pyFRF") is None:
             print("pyFRF is not installed (`pip install pyFRF==1.5.0`): its row is skipped\n")
             names.remove("pyfrf")
