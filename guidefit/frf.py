@@ -699,12 +699,14 @@ def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windo
     (n_samples, C) records; a record that is the transpose of contiguous rows,
     as hits from :func:`guidefit.hits.iter_hits` give, is multiplied row by row).
 
-    The main thread pulls the records from ``items`` (for hits: reads and
-    checks them) and windows them into a block buffer; ``workers`` threads
-    transform the blocks and add their spectra to the sums (``scipy.fft`` and
-    numpy's ufuncs release the GIL, so all of this overlaps). The sums are
-    added block after block in order, so the result does not depend on the
-    threads' timing. Returns ``None`` when there is no record.
+    ``workers`` threads in all: the calling thread pulls the records from
+    ``items`` (for hits: reads and checks them) and windows them into a block
+    buffer; ``workers - 1`` helper threads transform the blocks and add their
+    spectra to the sums (``scipy.fft`` and numpy's ufuncs release the GIL, so
+    this overlaps the reading and checking). With ``workers=1`` everything
+    runs on the calling thread. The sums are added block after block in hit
+    order, so the result does not depend on the number of threads or their
+    timing. Returns ``None`` when there is no record.
     """
     import threading
     from concurrent.futures import ThreadPoolExecutor
@@ -719,7 +721,8 @@ def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windo
             n, c = record.shape
             n_first = max(1, min(_WINDOW_HITS, _WINDOW_BYTES // (8 * n * c)))
             block = _block_size(n, c)
-            n_bufs = 1 if workers <= 1 else workers + 1  # one being filled, one per thread
+            helpers = workers - 1  # threads besides the calling one
+            n_bufs = helpers + 1  # one being filled, one per helper
             space = np.empty((max(n_bufs * block, n_first), c, n))
             first = space[:n_first]
         np.copyto(first[k], record.T)
@@ -782,7 +785,7 @@ def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windo
         finally:
             added.set()
 
-    with ThreadPoolExecutor(max_workers=workers) if workers > 1 else _NullExecutor() as pool:
+    with ThreadPoolExecutor(max_workers=helpers) if helpers else _NullExecutor() as pool:
         futures = []
         added = None
         turn = 0
@@ -892,8 +895,10 @@ def spectral_sums(
         Hit ``i`` goes to group ``i % n_groups``; groups that got no hit (fewer
         hits than groups) are dropped.
     workers : int
-        Threads for the FFT (``scipy.fft`` ``workers``); with more than one, the
-        spectral products also overlap the next block's FFT.
+        Threads in all: with more than one, ``workers - 1`` helper threads
+        transform the blocks and accumulate their spectra while the calling
+        thread windows the next records (and, for hits, reads and checks
+        them). The result is the same for any number.
 
     Returns
     -------
@@ -1145,7 +1150,7 @@ def frf_from_records(
     n_groups : int
         Jackknife groups (fewer if there are fewer hits).
     workers : int
-        FFT threads.
+        Threads in all (see :func:`spectral_sums`); the result does not depend on it.
 
     Returns
     -------
