@@ -1555,10 +1555,12 @@ def open_reader(run: Run) -> Iterator[RunReader]:
         try:
             ds = f[source.dataset]
             direct = None
-            if run.layout == "hits" and ds.chunks is not None and ds.chunks[0] == 1:
-                # hits are read whole, so each chunk (part of one hit) is read
-                # once: without a chunk cache HDF5 reads it straight into the
-                # output array instead of through the cache (one copy less)
+            chunks = ds.chunks
+            if run.layout == "hits" and chunks is not None and chunks[0] == 1 and chunks[2] == ds.shape[2]:
+                # hits are read whole, so each chunk (consecutive samples of
+                # one hit, all channels) is read once: without a chunk cache
+                # HDF5 reads it straight into the output array instead of
+                # through the cache (one copy less)
                 access = h5py.h5p.create(h5py.h5p.DATASET_ACCESS)
                 access.set_chunk_cache(0, 0, 1.0)
                 direct = h5py.h5d.open(f.id, source.dataset.encode(), dapl=access)
