@@ -772,38 +772,54 @@ def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windo
                     break
         return k
 
-    def transform(turn: int, k: int, i0: int, added_before: threading.Event | None,
-                  added: threading.Event) -> None:
+    # spectra of transformed blocks wait here, by block number, to be added in order
+    transformed: dict[int, tuple[np.ndarray, int]] = {}
+    state = {"next": 0}  # the block to add next
+    adding = threading.Lock()  # held while adding: one thread at a time, in order
+
+    def add_ready(wait: bool) -> None:
+        """Add the transformed blocks that are next in order (``wait``: for the lock)."""
+        if not adding.acquire(blocking=wait):
+            return  # another thread is adding; it takes the ready blocks too
+        try:
+            while state["next"] in transformed:
+                acc.add(*transformed.pop(state["next"]))
+                state["next"] += 1
+        finally:
+            adding.release()
+
+    def transform(turn: int, k: int, i0: int, number: int) -> None:
         try:
             Z = scipy.fft.rfft(bufs[turn][:k], axis=-1, workers=1)
         finally:
             free[turn].set()
-        try:
-            if added_before is not None:
-                added_before.wait()
-            acc.add(Z, i0)
-        finally:
-            added.set()
+        transformed[number] = (Z, i0)
+        add_ready(wait=False)
 
     with ThreadPoolExecutor(max_workers=helpers) if helpers else _NullExecutor() as pool:
         futures = []
-        added = None
+        number = 0
         turn = 0
         while True:
-            free[turn].wait()
+            if not free[turn].is_set():
+                add_ready(wait=False)  # rather than wait idle: add what a helper transformed
+                free[turn].wait()
+            if len(transformed) > n_bufs:  # bound the spectra waiting to be added
+                add_ready(wait=True)
             k = fill(turn)
             if k == 0:
                 break
             free[turn].clear()
-            added_before, added = added, threading.Event()
             futures = [f for f in futures if not f.done()]
-            futures.append(pool.submit(transform, turn, k, acc.n_hits, added_before, added))
+            futures.append(pool.submit(transform, turn, k, acc.n_hits, number))
+            number += 1
             acc.n_hits += k
             turn = (turn + 1) % n_bufs
             if k < block:
                 break
         for future in futures:
             future.result()
+        add_ready(wait=True)
     return acc
 
 
