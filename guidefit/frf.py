@@ -810,7 +810,9 @@ def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windo
             if k == 0:
                 break
             free[turn].clear()
-            futures = [f for f in futures if not f.done()]
+            for future in [f for f in futures if f.done()]:
+                future.result()  # re-raises a helper's error
+                futures.remove(future)
             futures.append(pool.submit(transform, turn, k, acc.n_hits, number))
             number += 1
             acc.n_hits += k
@@ -820,6 +822,8 @@ def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windo
         for future in futures:
             future.result()
         add_ready(wait=True)
+    if state["next"] != number:  # cannot happen unless a block was lost
+        raise RuntimeError(f"frf: {number - state['next']} transformed block(s) not added")
     return acc
 
 

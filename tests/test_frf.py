@@ -477,6 +477,25 @@ def test_threads_and_hit_rows_give_the_same_bits(tmp_path):
                                                               want.force_window_s)
 
 
+@pytest.mark.parametrize("workers", [1, 2, 3])
+def test_an_error_while_adding_a_block_is_raised(monkeypatch, workers):
+    import guidefit.frf as frf_module
+
+    add = frf_module._Accumulator.add
+    calls = []
+
+    def failing(self, Z, i0):
+        calls.append(i0)
+        if len(calls) == 3:
+            raise MemoryError("no room for the sums")
+        return add(self, Z, i0)
+
+    monkeypatch.setattr(frf_module._Accumulator, "add", failing)
+    rec = np.random.default_rng(0).normal(size=(20, 64, 3))
+    with pytest.raises(MemoryError, match="no room"):
+        frf_from_records(iter(rec), 100.0, window=NONE, workers=workers)
+
+
 def test_force_in_any_column():
     rec, _ = random_records(8, 5, 32, 3, 0.2)
     moved = rec[:, :, [1, 2, 0, 3]]
