@@ -357,6 +357,52 @@ def _refit_one(frf, mode, max_nfev: int = 20):
         return None
 
 
+def _refit_in_band(frf, mode, run_fits, max_nfev: int = 40):
+    """Refit ``mode`` in its narrow band together with the run's other modes inside the band.
+
+    A single-mode refit lets a neighbour inside the band (pitch 9 % below the
+    10 %-damped roll_low, whose band is +/- 31 %) pull the pole towards it;
+    fitted as a mode of its own the neighbour cannot. Tried in turn: with
+    every mode of ``run_fits`` in the band, with the labelled ones only (an
+    extra peak may be a second pole of one amplitude-dependent peak, which a
+    subset of the hits does not support), alone. The first refit whose pole
+    stays within half the mode's bandwidth (``zeta f``) of the all-hits fit is
+    returned, as in ``modes.auto_fit``'s joint refit (None when none does),
+    with the band (Hz): ``+/- max(3 zeta, 3 %)``, widened bin by bin until
+    it holds enough bins for the fit.
+    """
+    import warnings as _w
+
+    from guidefit import modes as modes_mod
+
+    lo, hi = _narrow_band(mode)
+    f = frf.frequency_hz
+    step = float(np.median(np.diff(f)))
+    inside = [(m, lab) for m, lab in run_fits if m is not mode and lo < m.frequency_hz < hi]
+    # at least 4 bins more than a fit of every mode in the band needs (modes.fit_band: 3 n + 5)
+    while np.count_nonzero((f > lo) & (f < hi)) < 3 * (len(inside) + 1) + 9 and hi - lo < mode.frequency_hz:
+        lo, hi = lo - step, hi + step
+        inside = [(m, lab) for m, lab in run_fits if m is not mode and lo < m.frequency_hz < hi]
+    tries, seen = [], set()
+    for others in ([m for m, _ in inside], [m for m, lab in inside if lab != "extra"], []):
+        key = tuple(id(m) for m in others)
+        if key not in seen:
+            seen.add(key)
+            tries.append(sorted([mode, *others], key=lambda m: m.frequency_hz))
+    for group in tries:
+        try:
+            with _w.catch_warnings():
+                _w.simplefilter("ignore")
+                fits = modes_mod.fit_modes(f, frf.H, (lo, hi), len(group), initial=group,
+                                       max_nfev=max_nfev if len(group) > 1 else 20)
+        except (IdentificationError, ValueError, np.linalg.LinAlgError):
+            continue
+        r = fits[group.index(mode)]  # both sorted by frequency
+        if abs(r.frequency_hz - mode.frequency_hz) <= mode.damping_ratio * mode.frequency_hz:
+            return r, (lo, hi)
+    return None, (lo, hi)
+
+
 def _jackknife(frf, modes) -> list[tuple[float | None, float | None]]:
     """Delete-a-group jackknife std of (f_n, zeta) for each mode; None where too few groups.
 
@@ -478,15 +524,20 @@ def _force_levels(run, frf, rows, modes, settings, warnings: list) -> list[dict]
     """Frequencies of the run's labelled modes per hit-force bin (terciles of the accepted hits).
 
     Each bin's hits are averaged into their own FRF with the run's windows and
-    refitted from the run's modes; a preloaded Hertz contact shows as a
+    each mode is refitted in its narrow band with the run's other modes inside
+    that band (:func:`_refit_in_band`); a preloaded Hertz contact shows as a
     frequency that falls with force. Only when the forces differ by at least
-    ``min_force_ratio``; every bin needs two hits.
+    ``min_force_ratio``; every bin needs two hits. A level gives the bin's mean
+    peak force and its hits' peak forces (``hit_forces_n``: H1 weights each
+    hit's FRF by its force squared, so the bin's frequency is that of its
+    force-squared weighted hits, not of the mean force).
     """
     from guidefit import frf as frf_mod
     from guidefit.hits import HitSettings, iter_hits
 
     accepted = [r for r in rows if r["accepted"]]
     fitted = sorted((m for m in modes if m.label != "extra" and m.fit is not None), key=lambda m: m.frequency_hz)
+    run_fits = [(m.fit, m.label) for m in modes if m.fit is not None]  # extra peaks pull a neighbour too
     if not fitted or len(accepted) < 2 * settings.force_bins:
         return []
     forces = np.array([r["peak_force_n"] for r in accepted])
@@ -504,20 +555,24 @@ def _force_levels(run, frf, rows, modes, settings, warnings: list) -> list[dict]
             warnings.append(f"run '{run.name}': force-level FRF failed ({exc})")
             return []
         for m in fitted:
-            # one mode in a narrow band around it: robust against modes trading places
-            r = _refit_one(sub, m.fit)
-            if r is None:
-                continue
-            f_n = r.frequency_hz
-            if frf.exp_window_tau_s:
-                f_n, _ = frf_mod.exponential_window_damping_correction(r.damping_ratio, r.frequency_hz,
-                                                                     frf.exp_window_tau_s)
-            levels.append({"run": run.name, "label": m.label, "peak_force_n": float(np.mean(forces[members])),
-                           "n_hits": int(len(members)), "frequency_hz": float(f_n),
-                           "frequency_std_hz": r.frequency_std_hz,
-                           "hit_position_m": None if run.excitation_position_m is None
-                           else [float(x) for x in run.excitation_position_m],
-                           "hit_direction": [float(x) for x in run.excitation_direction]})
+            # a narrow band around the mode, every mode of the run inside it refitted with it:
+            # robust against modes trading places, and a neighbour in the band cannot pull it
+            r, band = _refit_in_band(sub, m.fit, run_fits)
+            level = {"run": run.name, "label": m.label, "peak_force_n": float(np.mean(forces[members])),
+                     "n_hits": int(len(members)), "hit_forces_n": [float(x) for x in np.sort(forces[members])],
+                     "frequency_hz": None, "frequency_std_hz": None, "band_hz": [float(x) for x in band],
+                     "hit_position_m": None if run.excitation_position_m is None
+                     else [float(x) for x in run.excitation_position_m],
+                     "hit_direction": [float(x) for x in run.excitation_direction]}
+            if r is None:  # the mode is not reproduced by this bin's hits: a level without a frequency
+                level["refit_failed"] = True
+            else:
+                f_n = r.frequency_hz
+                if frf.exp_window_tau_s:
+                    f_n, _ = frf_mod.exponential_window_damping_correction(r.damping_ratio, r.frequency_hz,
+                                                                         frf.exp_window_tau_s)
+                level["frequency_hz"], level["frequency_std_hz"] = float(f_n), r.frequency_std_hz
+            levels.append(level)
     return levels
 
 
