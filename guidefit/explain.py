@@ -248,7 +248,8 @@ class ForceLevel:
     ``band_hz``: the band of the refit that gave the frequency (default
     ``+/- max(3 zeta, 3 %)``). ``frequency_hz`` None: the bin's hits did not
     reproduce the mode (identify's refit moved it by more than its
-    half-power half-bandwidth or failed).
+    half-power half-bandwidth or failed). ``shape``: the mode's modal
+    constants per channel from that refit.
     """
 
     peak_force_n: float
@@ -261,6 +262,7 @@ class ForceLevel:
     run: str | None = None
     hit_forces_n: tuple | None = None
     band_hz: tuple | None = None
+    shape: dict | None = None
 
 
 # --------------------------------------------------------------------------- result
@@ -420,6 +422,35 @@ def _shape_noise(unit: np.ndarray, s_mat: np.ndarray) -> float:
     return max(noise, ESTIMATED_SHAPE_STD_FLOOR)
 
 
+def _level_shape_scatter(mode, names, unit: np.ndarray, force_levels) -> float:
+    """Relative per-channel scatter of a mode's shape over its force bins (0 without level shapes).
+
+    identify refits each mode on the hits of each force bin; the component
+    of a bin's unit shape perpendicular to the all-hits one, RMS over the
+    bins, as a per-channel standard deviation
+    ``|m_b - a (a . m_b)| sqrt(n_ch / (n_ch - 1))``. With linear contacts it
+    is noise (below 0.5 % on simulated recordings, under the 2 % floor);
+    when the frequency drifts with amplitude the modal fit of overlapping,
+    chirped peaks moves a weak mode's shape with the hit force (pitch in a
+    lateral run beside the 10 %-damped roll_low: 6-77 %), which a linear
+    model's shape cannot follow.
+    """
+    lab = _canonical(mode.label)
+    perp = []
+    for lv in force_levels:
+        if (not isinstance(lv, ForceLevel) or lv.frequency_hz is None or not lv.shape or lv.run != mode.run
+                or _canonical(lv.label) != lab or not all(c in lv.shape for c in names)):
+            continue
+        b = np.array([complex(lv.shape[c]) for c in names])
+        if not np.all(np.isfinite(b)) or not np.any(b):
+            continue
+        b = _real_unit(b)
+        perp.append(float(np.linalg.norm(b - unit * (unit @ b))))
+    if len(perp) < 2 or unit.size < 2:
+        return 0.0
+    return math.sqrt(float(np.mean(np.square(perp))) * unit.size / (unit.size - 1))
+
+
 def _nonlinear_runs(groups, f, sigma, runs) -> set:
     """Runs whose force levels, as a whole, change with force beyond their uncertainty (p < ACCEPT_P_VALUE)."""
     chi2: dict = {}
@@ -484,6 +515,7 @@ def _prepare(measured, guide, sensors, force_levels, notes) -> _Data:
                           for c in names])
         unit = _real_unit(vals)
         s_std = _shape_noise(unit, s_mat) if m.shape_std is None else max(float(m.shape_std), SHAPE_STD_FLOOR)
+        s_std = max(s_std, _level_shape_scatter(m, names, unit, force_levels))
         entry = by_set.setdefault(tuple(names), ([], [], s_mat, []))
         entry[0].append(i)
         entry[1].append(unit)
@@ -1855,6 +1887,7 @@ def _level_from(entry, what: str) -> ForceLevel:
         frequency_std_hz=None if entry["frequency_hz"] is None else _std_of(entry, what),
         hit_forces_n=None if forces is None else tuple(_number(x, f"{what}: 'hit_forces_n'") for x in forces),
         band_hz=None if band is None else tuple(_number(x, f"{what}: 'band_hz'") for x in band),
+        shape=_shape(entry.get("shape"), f"{what}: 'shape'"),
         hit_position_m=None if pos is None else _vector3(pos, f"{what}: 'hit_position_m'"),
         hit_direction=None if direction is None else _vector3(direction, f"{what}: 'hit_direction'"),
         pulse_s=_number(entry.get("pulse_s"), f"{what}: 'pulse_s'", allow_none=True),
