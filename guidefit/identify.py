@@ -358,11 +358,12 @@ def _refit_one(frf, mode, max_nfev: int = 20):
 
 
 def _refit_in_band(frf, mode, run_fits, max_nfev: int = 40):
-    """Refit ``mode`` in its narrow band on an FRF from which the run's other modes are taken out.
+    """Refit ``mode`` in its narrow band on an FRF from which its near neighbours are taken out.
 
     The run's other modes (``run_fits``: (Mode, label) of its all-hits fit)
-    outside the band are subtracted (:func:`guidefit.modes.synthesize`), those
-    inside are fitted with it. A single-mode refit of the FRF itself is pulled
+    outside the band whose own narrow band reaches into it are subtracted
+    (:func:`guidefit.modes.synthesize`), those inside are fitted with it,
+    distant ones are left to the residual terms. A single-mode refit of the FRF itself is pulled
     by a neighbour: the flank of the 10 %-damped roll_low cut by pitch's
     +/- 6 % band biased pitch by +0.12 % on a linear recording, and pitch
     inside roll_low's +/- 31 % band pulled roll_low by 8 % in a vertical
@@ -372,8 +373,9 @@ def _refit_in_band(frf, mode, run_fits, max_nfev: int = 40):
     (an extra peak may be a second pole of one amplitude-dependent peak,
     which a subset of the hits does not support), alone. The first refit
     whose pole stays within half the mode's bandwidth (``zeta f``) of the
-    all-hits fit is returned, as in ``modes.auto_fit``'s joint refit (None
-    when none does), with the band (Hz).
+    all-hits fit, as in ``modes.auto_fit``'s joint refit, and whose shape
+    keeps a MAC of :data:`REFIT_MIN_MAC` with it is returned (None when none
+    does), with the band (Hz).
     """
     import warnings as _w
 
@@ -391,7 +393,10 @@ def _refit_in_band(frf, mode, run_fits, max_nfev: int = 40):
     while np.count_nonzero((f > lo) & (f < hi)) < 3 * (len(inside) + 1) + 9 and hi - lo < mode.frequency_hz:
         lo, hi = lo - step, hi + step
         inside = inside_band()
-    outside = [m for m, _ in run_fits if m is not mode and not lo < m.frequency_hz < hi]
+    # near neighbours, whose own band reaches into this one, are subtracted; distant modes are left to the
+    # residual terms, as in any narrow-band fit
+    outside = [m for m, _ in run_fits if m is not mode and not lo < m.frequency_hz < hi
+               and _narrow_band(m)[0] < hi and _narrow_band(m)[1] > lo]
     H, weights = frf.H, None
     if outside:
         try:
@@ -421,9 +426,21 @@ def _refit_in_band(frf, mode, run_fits, max_nfev: int = 40):
         except (IdentificationError, ValueError, np.linalg.LinAlgError):
             continue
         r = fits[group.index(mode)]  # both sorted by frequency
-        if abs(r.frequency_hz - mode.frequency_hz) <= mode.damping_ratio * mode.frequency_hz:
+        if (abs(r.frequency_hz - mode.frequency_hz) <= mode.damping_ratio * mode.frequency_hz
+                and _mac(r.modal_constants, mode.modal_constants) >= REFIT_MIN_MAC):
             return r, (lo, hi)
     return None, (lo, hi)
+
+
+#: A force-level refit whose shape has a lower MAC with the all-hits shape is not the same mode.
+REFIT_MIN_MAC = 0.9
+
+
+def _mac(a, b) -> float:
+    """Modal assurance criterion of two real shapes (:func:`real_shape` of modal constants)."""
+    x, y = real_shape(a), real_shape(b)
+    den = float((x @ x) * (y @ y))
+    return float((x @ y) ** 2 / den) if den > 0 else 0.0
 
 
 def _jackknife(frf, modes) -> list[tuple[float | None, float | None]]:
@@ -578,10 +595,16 @@ def _force_levels(run, frf, rows, modes, settings, warnings: list) -> list[dict]
         except IdentificationError as exc:
             warnings.append(f"run '{run.name}': force-level FRF failed ({exc})")
             return []
+        # a narrow band around each mode, the run's other modes subtracted or refitted with it: robust
+        # against modes trading places, and a neighbour cannot pull it. A mode that this bin's hits do not
+        # reproduce is then left out of its neighbours' refits: its all-hits fit would pull them instead
+        refits = {id(m): _refit_in_band(sub, m.fit, run_fits) for m in fitted}
+        failed = {id(m.fit) for m in fitted if refits[id(m)][0] is None}
+        if failed:
+            kept = [(fit, lab) for fit, lab in run_fits if id(fit) not in failed]
+            refits.update({id(m): _refit_in_band(sub, m.fit, kept) for m in fitted if id(m.fit) not in failed})
         for m in fitted:
-            # a narrow band around the mode, every mode of the run inside it refitted with it:
-            # robust against modes trading places, and a neighbour in the band cannot pull it
-            r, band = _refit_in_band(sub, m.fit, run_fits)
+            r, band = refits[id(m)]
             level = {"run": run.name, "label": m.label, "peak_force_n": float(np.mean(forces[members])),
                      "n_hits": int(len(members)), "hit_forces_n": [float(x) for x in np.sort(forces[members])],
                      "frequency_hz": None, "frequency_std_hz": None, "band_hz": [float(x) for x in band],
