@@ -405,10 +405,10 @@ def _refit_in_band(frf, mode, run_fits, max_nfev: int = 40):
             # hardly move (pitch in x) would be what the subtraction leaves, scaled up; weight each
             # channel by the share of the band's modes in it instead
             sel = (f > lo) & (f < hi)
-            own = modes_mod.synthesize(f[sel], [mode] + [m for m, _ in inside])
-            share = np.sqrt(np.mean(np.abs(own) ** 2, axis=0) / np.maximum(np.mean(np.abs(H[sel]) ** 2, axis=0),
-                                                                            1e-300))
-            weights = np.broadcast_to(np.clip(share, 0.0, 1.0), H.shape)
+            own = np.sqrt(np.mean(np.abs(modes_mod.synthesize(f[sel], [mode] + [m for m, _ in inside])) ** 2, axis=0))
+            share = own / np.maximum(np.sqrt(np.mean(np.abs(H[sel]) ** 2, axis=0)), 1e-300)
+            # ... and by its amplitude relative to the strongest channel (both parts tiny: not a datum)
+            weights = np.broadcast_to(np.clip(share, 0.0, 1.0) * own / max(float(own.max()), 1e-300), H.shape)
         except ValueError:  # residues of another channel set: refit the FRF as it is
             H, weights = frf.H, None
     tries, seen = [], set()
