@@ -770,7 +770,7 @@ def effective_force(hit_forces_n) -> float:
     forces spread.
 
     >>> round(effective_force([100.0, 200.0, 300.0]), 1)
-    256.9
+    264.6
     >>> effective_force([250.0, 250.0])
     250.0
     """
@@ -833,7 +833,8 @@ def _decay_fit_frequency(w0: float, w_of_time: np.ndarray, zeta: float, band: fl
     ``theta' = w(t) sqrt(1 - zeta^2)`` (``w_of_time`` at
     :data:`_DECAY_TIMES` of ``t_end = ln(1e4) / (zeta w0)``), is transformed
     and fitted near its peak (relative half-width ``band``, default
-    +/- max(3 zeta, 3 %) as identify's force-level refits) by ``r/(s - p) + c`` (linearised, two reweighting
+    +/- max(3 zeta, 3 %) as identify's force-level refits) by
+    ``r/(s - p) + c`` (linearised, two reweighting
     passes towards the output error). A fit of an FRF weights the slowly
     sweeping small-amplitude tail most, so it sees a smaller drop than the
     energy-weighted mean of ``w`` (about half at a 3 % drop).

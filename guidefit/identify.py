@@ -362,12 +362,13 @@ def _refit_in_band(frf, mode, run_fits, max_nfev: int = 40):
 
     The run's other modes (``run_fits``: (Mode, label) of its all-hits fit)
     outside the band whose own narrow band reaches into it are subtracted
-    (:func:`guidefit.modes.synthesize`), those inside are fitted with it,
-    distant ones are left to the residual terms. A single-mode refit of the FRF itself is pulled
-    by a neighbour: the flank of the 10 %-damped roll_low cut by pitch's
-    +/- 6 % band biased pitch by +0.12 % on a linear recording, and pitch
-    inside roll_low's +/- 31 % band pulled roll_low by 8 % in a vertical
-    run. The band stays +/- max(3 zeta, 3 %), widened bin by bin until it
+    (:func:`guidefit.modes.synthesize`; channels then weighted by the share
+    and relative amplitude of the band's modes in them), those inside are
+    fitted with it, distant ones are left to the residual terms. A
+    single-mode refit of the FRF itself is pulled by a neighbour: the flank
+    of the 10 %-damped roll_low cut by pitch's +/- 6 % band biased pitch by
+    +0.12 % on a linear recording, and pitch inside roll_low's +/- 31 % band
+    pulled roll_low by 8 % in a vertical run. The band stays +/- max(3 zeta, 3 %), widened bin by bin until it
     holds enough bins: the estimator that explain's amplitude model follows.
     Tried in turn: with every mode in the band, with its labelled ones only
     (an extra peak may be a second pole of one amplitude-dependent peak,
@@ -564,13 +565,19 @@ def _force_levels(run, frf, rows, modes, settings, warnings: list) -> list[dict]
     """Frequencies of the run's labelled modes per hit-force bin (terciles of the accepted hits).
 
     Each bin's hits are averaged into their own FRF with the run's windows and
-    each mode is refitted in its narrow band with the run's other modes inside
-    that band (:func:`_refit_in_band`); a preloaded Hertz contact shows as a
-    frequency that falls with force. Only when the forces differ by at least
-    ``min_force_ratio``; every bin needs two hits. A level gives the bin's mean
-    peak force and its hits' peak forces (``hit_forces_n``: H1 weights each
-    hit's FRF by its force squared, so the bin's frequency is that of its
-    force-squared weighted hits, not of the mean force).
+    each mode is refitted in its narrow band, its near neighbours subtracted
+    and the modes inside the band fitted with it (:func:`_refit_in_band`); a
+    preloaded Hertz contact shows as a frequency that falls with force. Only
+    when the forces differ by at least ``min_force_ratio``; every bin needs
+    two hits. A level gives the bin's mean peak force and its hits' peak
+    forces (``hit_forces_n``: H1 weights each hit's FRF by its force squared,
+    so the bin's frequency is that of its force-squared weighted hits, not of
+    the mean force), the refit's band (``band_hz``) and shape (``shape``,
+    real modal constants per channel). A bin whose hits do not reproduce the
+    mode (the refit moves it by more than ``zeta f`` or to a MAC below
+    :data:`REFIT_MIN_MAC`) gives a level without a frequency
+    (``refit_failed``), and the mode is left out of its neighbours' refits of
+    that bin.
     """
     from guidefit import frf as frf_mod
     from guidefit.hits import HitSettings, iter_hits
