@@ -243,16 +243,26 @@ class ForceLevel:
 
     ``hit_position_m``, ``hit_direction`` and ``pulse_s`` describe the hits
     (defaults: :data:`DEFAULT_HITS` for the label and :data:`DEFAULT_PULSE_S`).
+    ``hit_forces_n``: the peak force of every hit of the bin (H1 weights a
+    hit by its force squared; default: ``peak_force_n`` for all).
+    ``band_hz``: the band of the refit that gave the frequency (default
+    ``+/- max(3 zeta, 3 %)``). ``frequency_hz`` None: the bin's hits did not
+    reproduce the mode (identify's refit moved it by more than its
+    half-power half-bandwidth or failed). ``shape``: the mode's modal
+    constants per channel from that refit.
     """
 
     peak_force_n: float
     label: str
-    frequency_hz: float
+    frequency_hz: float | None
     frequency_std_hz: float | None
     hit_position_m: tuple | None = None
     hit_direction: tuple | None = None
     pulse_s: float | None = None
     run: str | None = None
+    hit_forces_n: tuple | None = None
+    band_hz: tuple | None = None
+    shape: dict | None = None
 
 
 # --------------------------------------------------------------------------- result
@@ -354,9 +364,12 @@ class _Data:
     lv_groups: list  # index arrays into the levels, one per (run, label): a trend by one estimator
     lv_run: list
     mode_zeta: np.ndarray  # (n,) damping ratio per measured mode (nan: unknown)
+    lv_weight: np.ndarray  # H1 weight of a level's hits: sum of their forces squared
+    lv_band: list  # relative half-width of the refit band, or None (+/- max(3 zeta, 3 %))
     mode_force: np.ndarray  # (n,) F_eff per measured mode (nan: small amplitude)
     mode_hit: list  # hit geometry per measured mode or None
-    mode_levels: list  # per measured mode: (forces, hits) of the force levels whose hits made its FRF
+    mode_levels: list  # per measured mode: level indices whose hits made its FRF, or None
+    f_fit: np.ndarray  # (n,) identify's all-hits frequency (f differs where the levels replaced it)
     n_data: int
     n_shape_dof: int
 
@@ -407,6 +420,35 @@ def _shape_noise(unit: np.ndarray, s_mat: np.ndarray) -> float:
     q, *_ = np.linalg.lstsq(s_mat, unit, rcond=None)
     noise = float(np.linalg.norm(unit - s_mat @ q)) * math.sqrt(n / (n - rank))
     return max(noise, ESTIMATED_SHAPE_STD_FLOOR)
+
+
+def _level_shape_scatter(mode, names, unit: np.ndarray, force_levels) -> float:
+    """Relative per-channel scatter of a mode's shape over its force bins (0 without level shapes).
+
+    identify refits each mode on the hits of each force bin; the component
+    of a bin's unit shape perpendicular to the all-hits one, RMS over the
+    bins, as a per-channel standard deviation
+    ``|m_b - a (a . m_b)| sqrt(n_ch / (n_ch - 1))``. With linear contacts it
+    is noise (below 0.5 % on simulated recordings, under the 2 % floor);
+    when the frequency drifts with amplitude the modal fit of overlapping,
+    chirped peaks moves a weak mode's shape with the hit force (pitch in a
+    lateral run beside the 10 %-damped roll_low: 6-77 %), which a linear
+    model's shape cannot follow.
+    """
+    lab = _canonical(mode.label)
+    perp = []
+    for lv in force_levels:
+        if (not isinstance(lv, ForceLevel) or lv.frequency_hz is None or not lv.shape or lv.run != mode.run
+                or _canonical(lv.label) != lab or not all(c in lv.shape for c in names)):
+            continue
+        b = np.array([complex(lv.shape[c]) for c in names])
+        if not np.all(np.isfinite(b)) or not np.any(b):
+            continue
+        b = _real_unit(b)
+        perp.append(float(np.linalg.norm(b - unit * (unit @ b))))
+    if len(perp) < 2 or unit.size < 2:
+        return 0.0
+    return math.sqrt(float(np.mean(np.square(perp))) * unit.size / (unit.size - 1))
 
 
 def _nonlinear_runs(groups, f, sigma, runs) -> set:
@@ -473,6 +515,7 @@ def _prepare(measured, guide, sensors, force_levels, notes) -> _Data:
                           for c in names])
         unit = _real_unit(vals)
         s_std = _shape_noise(unit, s_mat) if m.shape_std is None else max(float(m.shape_std), SHAPE_STD_FLOOR)
+        s_std = max(s_std, _level_shape_scatter(m, names, unit, force_levels))
         entry = by_set.setdefault(tuple(names), ([], [], s_mat, []))
         entry[0].append(i)
         entry[1].append(unit)
@@ -483,16 +526,28 @@ def _prepare(measured, guide, sensors, force_levels, notes) -> _Data:
     for i, r in enumerate(runs_of):
         groups.setdefault(r, []).append(i)
     # force levels
-    lv_f, lv_s, lv_force, lv_label, lv_hit, lv_run = [], [], [], [], [], []
+    lv_f, lv_s, lv_force, lv_label, lv_hit, lv_run, lv_w, lv_band = [], [], [], [], [], [], [], []
+    lv_raw_s: list = []
     for j, lv in enumerate(force_levels):
         if not isinstance(lv, ForceLevel):
             raise RecordingError(f"force level {j}: expected a ForceLevel, got {type(lv).__name__}")
-        if not _finite_positive(lv.peak_force_n) or not _finite_positive(lv.frequency_hz):
+        if not _finite_positive(lv.peak_force_n) or not (lv.frequency_hz is None or _finite_positive(lv.frequency_hz)):
             raise RecordingError(f"force level {j}: peak_force_n and frequency_hz must be positive numbers")
         lab = _canonical(lv.label)
         if lab is None:
             raise RecordingError(f"force level {j}: label '{lv.label}' is not a carriage mode label "
                                  f"({', '.join(CARRIAGE_LABELS)})")
+        if lv.frequency_hz is None:  # see _unreproduced
+            continue
+        forces_j = np.asarray(lv.hit_forces_n if lv.hit_forces_n else [lv.peak_force_n], float)
+        if forces_j.ndim != 1 or not np.all(np.isfinite(forces_j) & (forces_j > 0)):
+            raise RecordingError(f"force level {j}: hit_forces_n must be positive numbers")
+        band = None
+        if lv.band_hz is not None:
+            lo, hi = (float(x) for x in lv.band_hz)
+            if not 0 < lo < lv.frequency_hz < hi:
+                raise RecordingError(f"force level {j}: band_hz must hold frequency_hz, got {lv.band_hz!r}")
+            band = (hi - lo) / (hi + lo)
         std = lv.frequency_std_hz
         if std is None:
             std = DEFAULT_FREQUENCY_STD * lv.frequency_hz
@@ -505,7 +560,13 @@ def _prepare(measured, guide, sensors, force_levels, notes) -> _Data:
         pulse = float(lv.pulse_s) if lv.pulse_s is not None else DEFAULT_PULSE_S
         lv_f.append(float(lv.frequency_hz))
         lv_s.append(max(float(std), FORCE_LEVEL_FLOOR * float(lv.frequency_hz)))
-        lv_force.append(float(lv.peak_force_n))
+        lv_raw_s.append(float(std))
+        # H1 = sum X F* / sum |F|^2 averages the hits' FRFs with weights F^2, so the bin's
+        # frequency is that of the F^2-weighted hits; with a drop ~ F^2 (the describing function below
+        # lift-off) that is the frequency at F_eff = sqrt(sum F^4 / sum F^2), not at the mean force
+        lv_force.append(effective_force(forces_j))
+        lv_w.append(float(np.sum(forces_j**2)))
+        lv_band.append(band)
         lv_label.append(lab)
         lv_hit.append((tuple(point), direction, pulse))
         lv_run.append(lv.run)
@@ -526,20 +587,41 @@ def _prepare(measured, guide, sensors, force_levels, notes) -> _Data:
                      "or a single level: no trend)")
     remap = {j: k for k, j in enumerate(used)}
     lv_groups = [np.array([remap[j] for j in g]) for g in by_group.values() if len(g) >= 2]
-    lv_f, lv_s, lv_force = ([x[j] for j in used] for x in (lv_f, lv_s, lv_force))
+    lv_f, lv_s, lv_force, lv_raw_s = ([x[j] for j in used] for x in (lv_f, lv_s, lv_force, lv_raw_s))
     lv_label, lv_hit, lv_run = ([x[j] for j in used] for x in (lv_label, lv_hit, lv_run))
+    lv_w, lv_band = ([x[j] for j in used] for x in (lv_w, lv_band))
     mode_zeta = np.array([m.damping_ratio if _finite_positive(m.damping_ratio) else np.nan for m in measured])
     mode_force = np.full(len(f), np.nan)
     mode_hit: list = [None] * len(f)
     mode_levels: list = [None] * len(f)
+    f_fit = np.array(f)
+    replaced = []
     for i, lab in enumerate(labels):
         js = [j for j, ll in enumerate(lv_label) if ll == lab]
         if not js and runs_of[i] is not None:  # the same hits made every mode of a run
             js = [j for j, rr in enumerate(lv_run) if rr == runs_of[i]]
-        if lab is not None and js:
-            mode_force[i] = math.sqrt(float(np.mean(np.square([lv_force[j] for j in js]))))
-            mode_hit[i] = lv_hit[js[0]]
-            mode_levels[i] = ([lv_force[j] for j in js], [lv_hit[j] for j in js])
+        if lab is None or not js:
+            continue
+        w = np.array([lv_w[j] for j in js])
+        mode_force[i] = math.sqrt(float(np.sum(w * np.square([lv_force[j] for j in js])) / np.sum(w)))
+        mode_hit[i] = lv_hit[js[0]]
+        mode_levels[i] = js
+        own = [j for j in js if lv_label[j] == lab and lv_run[j] == runs_of[i]]
+        if len(own) >= 2:
+            # The mode's frequency from its own levels: the same hits (their H1 weights), but the narrow
+            # band refit that the amplitude model reproduces. The all-hits fit spans the whole band and,
+            # for a frequency that drifts within each hit, sees 1.5-3 times the drop (docs/explain.md).
+            w = np.array([lv_w[j] for j in own])
+            f_lv = float(np.sum(w * [lv_f[j] for j in own]) / np.sum(w))
+            s_lv = float(np.sqrt(np.sum(np.square(w * [lv_raw_s[j] for j in own]))) / np.sum(w))
+            f[i] = f_lv
+            sigma[i] = max(s_lv, sigma[i] * f_lv / f_fit[i])
+            mode_levels[i] = own
+            replaced.append(i)
+    if replaced:
+        notes.append("frequency from the mode's force levels (narrow-band refits of the same hits, H1-weighted): "
+                     + ", ".join(f"{labels[i]} ({runs_of[i]} run) {f[i]:.1f} Hz, all-hits fit {f_fit[i]:.1f} Hz"
+                                 for i in replaced))
     # A run whose frequencies change with hit force responded nonlinearly: the modal fit of its
     # amplitude-dependent peaks distorts the shapes (overlapping modes partitioned differently), so its
     # shapes are not used; its frequencies and force levels are.
@@ -565,7 +647,7 @@ def _prepare(measured, guide, sensors, force_levels, notes) -> _Data:
         runs=[np.array(v) for v in groups.values()], shapes=shapes, has_shape=has_shape,
         lv_f=np.array(lv_f), lv_sigma=np.array(lv_s), lv_force=np.array(lv_force), lv_label=lv_label,
         mode_zeta=mode_zeta, lv_hit=lv_hit, lv_groups=lv_groups, lv_run=lv_run, mode_force=mode_force, mode_hit=mode_hit,
-        mode_levels=mode_levels,
+        mode_levels=mode_levels, lv_weight=np.array(lv_w), lv_band=lv_band, f_fit=f_fit,
         n_data=len(f) + n_shape_dof + len(lv_f) - len(lv_groups), n_shape_dof=n_shape_dof,
     )
 
@@ -677,8 +759,27 @@ def _roller_modal(spec, sol) -> np.ndarray:
     return g @ sol.shapes
 
 
+def effective_force(hit_forces_n) -> float:
+    """Force (N) at which a frequency falling as F^2 equals that of the H1 average of hits.
+
+    H1 = sum X F* / sum |F|^2 weights each hit's FRF by its force squared, so
+    the fitted frequency is about the F^2-weighted mean of the hits'
+    frequencies; with ``f(F) = f0 - c F^2`` (the describing function below
+    lift-off, ``1 - r^2/81``) that is ``f(F_eff)``,
+    ``F_eff = sqrt(sum F^4 / sum F^2)``: above the mean force when the
+    forces spread.
+
+    >>> round(effective_force([100.0, 200.0, 300.0]), 1)
+    264.6
+    >>> effective_force([250.0, 250.0])
+    250.0
+    """
+    forces = np.asarray(hit_forces_n, float)
+    return float(np.sqrt(np.sum(forces**4) / np.sum(forces**2)))
+
+
 def _amplitude_frequency(ctx, spec, sol, j: int, force: float, hit, preload_factor: float,
-                         roller_modal=None, zetas=None) -> float:
+                         roller_modal=None, zetas=None, band: float | None = None) -> float:
     """Frequency (Hz) that a modal fit finds for model mode j after a hit of peak force F.
 
     Every model mode m rings after the hit with modal amplitude
@@ -688,9 +789,10 @@ def _amplitude_frequency(ctx, spec, sol, j: int, force: float, hit, preload_fact
     Rayleigh quotient with each roller's describing-function stiffness at
     ``a_i(t)``. The resulting decay, sweeping from the hit's frequency up to
     the small-amplitude one, is fitted as identify does
-    (:func:`_decay_fit_frequency`). ``roller_modal``: :func:`_roller_modal`
-    of (spec, sol) if already computed; ``zetas``: damping ratio per model
-    mode (nan or missing: :data:`DEFAULT_DECAY_DAMPING`).
+    (:func:`_decay_fit_frequency`, in the relative half-width ``band`` of
+    the refit, default +/- max(3 zeta, 3 %)). ``roller_modal``:
+    :func:`_roller_modal` of (spec, sol) if already computed; ``zetas``:
+    damping ratio per model mode (nan or missing: :data:`DEFAULT_DECAY_DAMPING`).
     """
     from guidefit.model.vibration import rigid_body_map
 
@@ -716,7 +818,7 @@ def _amplitude_frequency(ctx, spec, sol, j: int, force: float, hit, preload_fact
     w = np.sqrt(np.maximum(w0**2 + np.sum((k * c[:, j] ** 2)[:, None] * (d - 1.0), axis=0), (0.05 * w0) ** 2))
     if np.max(np.abs(w - w0)) <= 1e-7 * w0:
         return float(w0 / (2 * math.pi))
-    return _decay_fit_frequency(w0, w, zj)
+    return _decay_fit_frequency(w0, w, zj, band)
 
 
 #: Damping ratio of a mode that gives none (simulate's default for most modes).
@@ -724,14 +826,15 @@ DEFAULT_DECAY_DAMPING = 0.02
 _DECAY_TIMES = np.linspace(0.0, 1.0, 65) ** 2  # t / t_end at which w(t) is evaluated (dense early)
 
 
-def _decay_fit_frequency(w0: float, w_of_time: np.ndarray, zeta: float) -> float:
+def _decay_fit_frequency(w0: float, w_of_time: np.ndarray, zeta: float, band: float | None = None) -> float:
     """Frequency (Hz) of a single-pole fit to the spectrum of a decay with a time-varying frequency.
 
     The response ``a(t) sin(theta(t))``, ``a = exp(-zeta w0 t)``,
     ``theta' = w(t) sqrt(1 - zeta^2)`` (``w_of_time`` at
     :data:`_DECAY_TIMES` of ``t_end = ln(1e4) / (zeta w0)``), is transformed
-    and fitted near its peak (band +/- max(3 zeta, 3 %), as identify's
-    force-level refits) by ``r/(s - p) + c`` (linearised, two reweighting
+    and fitted near its peak (relative half-width ``band``, default
+    +/- max(3 zeta, 3 %) as identify's force-level refits) by
+    ``r/(s - p) + c`` (linearised, two reweighting
     passes towards the output error). A fit of an FRF weights the slowly
     sweeping small-amplitude tail most, so it sees a smaller drop than the
     energy-weighted mean of ``w`` (about half at a 3 % drop).
@@ -748,7 +851,7 @@ def _decay_fit_frequency(w0: float, w_of_time: np.ndarray, zeta: float) -> float
     nfft = 1 << int(math.ceil(math.log2(8 * n)))
     spec = np.fft.rfft(x, nfft)
     freq = np.arange(spec.size) * fs / nfft
-    half = max(3.0 * zeta, 0.03) * f0
+    half = (max(3.0 * zeta, 0.03) if band is None else band) * f0
     sel = (freq > f0 - half) & (freq < f0 + half)
     h, s = spec[sel], 2j * math.pi * freq[sel]
     a = np.column_stack([np.ones_like(h), h, s])
@@ -784,10 +887,11 @@ def _evaluate(ctx, data: _Data, effects) -> _Eval:
         for i in range(data.f.size):
             if pairing[i] >= 0 and math.isfinite(data.mode_force[i]):
                 # H1 averages the hits' FRFs with weights F^2: so does the prediction, over the force bins
-                forces, hits = data.mode_levels[i]
-                fk = [_amplitude_frequency(ctx, spec, sol, pairing[i], fo, h, amp, c_all, zetas)
-                      for fo, h in zip(forces, hits)]
-                w2 = np.square(forces)
+                js = data.mode_levels[i]
+                own = all(data.lv_label[k] == data.labels[i] for k in js)  # the levels' refit bands
+                fk = [_amplitude_frequency(ctx, spec, sol, pairing[i], data.lv_force[k], data.lv_hit[k], amp,
+                                           c_all, zetas, data.lv_band[k] if own else None) for k in js]
+                w2 = data.lv_weight[js]
                 f_pred[i] = float(np.sum(w2 * fk) / np.sum(w2))
     sigma = data.sigma
     if amp is not None:  # the amplitude model's own error: a share of the shift it predicts
@@ -812,7 +916,7 @@ def _evaluate(ctx, data: _Data, effects) -> _Eval:
         if j is None:
             continue
         lv_pred[k] = fm[j] if amp is None else _amplitude_frequency(
-            ctx, spec, sol, j, data.lv_force[k], data.lv_hit[k], amp, c_all, zetas)
+            ctx, spec, sol, j, data.lv_force[k], data.lv_hit[k], amp, c_all, zetas, data.lv_band[k])
     r_lv = np.full(data.lv_f.size, UNPAIRED_PENALTY)
     for g in data.lv_groups:  # the trend within a group: its weighted mean removed (one dof per group)
         d, s = lv_pred[g] - data.lv_f[g], data.lv_sigma[g]
@@ -1182,8 +1286,8 @@ def _error_dict(data: _Data, ev: _Eval, chi2: float, k: int, model: str, measure
         "p_value": _p_value(chi2, dof),
         "within_uncertainty": bool(dof > 0 and _p_value(chi2, dof) >= ACCEPT_P_VALUE),
         "model": model,
-        "per_mode": [{"label": m.label, "run": m.run, "measured_hz": float(m.frequency_hz), "error_pct": e}
-                     for m, e in zip(measured, errs)],
+        "per_mode": [{"label": m.label, "run": m.run, "measured_hz": float(fi), "error_pct": e}
+                     for m, fi, e in zip(measured, data.f, errs)],
     }
 
 
@@ -1359,6 +1463,10 @@ def explain_modes(measured, guide, sensors=(), force_levels=(), candidates=None,
     measured = list(measured)
     sensors = list(sensors or ())
     force_levels = list(force_levels or ())
+    unreproduced = _unreproduced(measured, force_levels)
+    if unreproduced and len(unreproduced) < len(measured):
+        return _without_unreproduced(measured, unreproduced, guide, sensors, force_levels, candidates, progress,
+                                     source, notes, drop_unproduced_extras)
     caller_notes = tuple(notes)
     notes = list(notes)
     data = _prepare(measured, guide, sensors, force_levels, notes)
@@ -1478,15 +1586,16 @@ def explain_modes(measured, guide, sensors=(), force_levels=(), candidates=None,
         jb, ja = int(nominal.pairing[i]), int(after.pairing[i])
         modes_out.append({
             "label": m.label if m.label is not None else (nominal.sol.labels[jb] if jb >= 0 else "extra"),
-            "run": m.run, "measured_hz": float(m.frequency_hz),
+            "run": m.run, "measured_hz": float(data.f[i]),
             "measured_std_hz": None if m.frequency_std_hz is None else float(m.frequency_std_hz),
+            "identified_hz": float(m.frequency_hz),
             "sigma_hz": float(data.sigma[i]),
             "model_before_hz": float(nominal.f_pred[i]) if jb >= 0 else None,
             "model_before_label": nominal.sol.labels[jb] if jb >= 0 else None,
             "model_after_hz": float(after.f_pred[i]) if ja >= 0 else None,
             "model_after_label": after.sol.labels[ja] if ja >= 0 and after.sol is not None else None,
-            "error_before_pct": (100.0 * (nominal.f_pred[i] - m.frequency_hz) / m.frequency_hz) if jb >= 0 else None,
-            "error_after_pct": (100.0 * (after.f_pred[i] - m.frequency_hz) / m.frequency_hz) if ja >= 0 else None,
+            "error_before_pct": (100.0 * (nominal.f_pred[i] - data.f[i]) / data.f[i]) if jb >= 0 else None,
+            "error_after_pct": (100.0 * (after.f_pred[i] - data.f[i]) / data.f[i]) if ja >= 0 else None,
             "mac_before": None if math.isnan(nominal.mac[i]) else float(nominal.mac[i]),
             "mac_after": None if math.isnan(after.mac[i]) else float(after.mac[i]),
             "status": "paired" if ja >= 0 else "extra",
@@ -1516,6 +1625,54 @@ def explain_modes(measured, guide, sensors=(), force_levels=(), candidates=None,
     return result
 
 
+def _unreproduced(measured, force_levels) -> list:
+    """Modes whose frequency the hits of their force bins do not reproduce.
+
+    identify refits every mode on the hits of each force bin; a level
+    without a frequency means the refit moved the pole by more than the
+    mode's half-power half-bandwidth (``zeta f``) or failed. A mode with such
+    levels and fewer than two good ones (a weak mode on the flank of a
+    strong, amplitude-dependent neighbour: pitch in a lateral run next to
+    the 10 %-damped roll_low) has an all-hits frequency that depends on which
+    hits are averaged by more than its bandwidth; its fit standard deviation
+    (a few Hz) does not say so.
+    """
+    good: dict = {}
+    bad: set = set()
+    for lv in force_levels:
+        if not isinstance(lv, ForceLevel):
+            continue
+        key = (lv.run, _canonical(lv.label))
+        if lv.frequency_hz is None:
+            bad.add(key)
+        else:
+            good[key] = good.get(key, 0) + 1
+    return [i for i, m in enumerate(measured) if isinstance(m, MeasuredMode)
+            and (m.run, _canonical(m.label)) in bad and good.get((m.run, _canonical(m.label)), 0) < 2]
+
+
+def _without_unreproduced(measured, drop, guide, sensors, force_levels, candidates, progress, source, notes,
+                          drop_unproduced_extras) -> Explanation:
+    """Explain without the modes of :func:`_unreproduced`; they are listed with status ``left out``."""
+    from dataclasses import replace
+
+    keep = [m for i, m in enumerate(measured) if i not in set(drop)]
+    text = ", ".join(f"{measured[i].label} ({measured[i].run} run) {measured[i].frequency_hz:.1f} Hz" for i in drop)
+    note = (f"left out: {text}: the hits of its force bins do not reproduce it (identify's refit moved it by more "
+            "than its half-power half-bandwidth), so its frequency depends on which hits are averaged")
+    sub = explain_modes(keep, guide, sensors, force_levels, candidates=candidates, progress=progress,
+                        source=source, notes=(*notes, note), drop_unproduced_extras=drop_unproduced_extras)
+    left = [{"label": measured[i].label or "extra", "run": measured[i].run,
+             "measured_hz": float(measured[i].frequency_hz), "measured_std_hz": measured[i].frequency_std_hz,
+             "identified_hz": float(measured[i].frequency_hz), "sigma_hz": None, "model_before_hz": None,
+             "model_before_label": None, "model_after_hz": None, "model_after_label": None,
+             "error_before_pct": None, "error_after_pct": None, "mac_before": None, "mac_after": None,
+             "status": "left out"} for i in drop]
+    return replace(sub, modes=tuple(sub.modes) + tuple(left),
+                   settings={**sub.settings, "left_out_unreproduced_hz": [float(measured[i].frequency_hz)
+                                                                          for i in drop]})
+
+
 def _without_extras(result, measured, extras, guide, sensors, force_levels, candidates, progress, source,
                     notes) -> Explanation:
     """Explain again without unlabelled extra peaks that no accepted model produces.
@@ -1539,7 +1696,8 @@ def _without_extras(result, measured, extras, guide, sensors, force_levels, cand
             "amplitude-dependent peak fitted by two poles, or a cause outside the library)")
     ignored = [{"label": measured[i].label or "extra", "run": measured[i].run,
                 "measured_hz": float(measured[i].frequency_hz),
-                "measured_std_hz": measured[i].frequency_std_hz, "sigma_hz": None, "model_before_hz": None,
+                "measured_std_hz": measured[i].frequency_std_hz,
+                "identified_hz": float(measured[i].frequency_hz), "sigma_hz": None, "model_before_hz": None,
                 "model_before_label": None, "model_after_hz": None, "model_after_label": None,
                 "error_before_pct": None, "error_after_pct": None, "mac_before": None, "mac_after": None,
                 "status": "left out"} for i in extras]
@@ -1717,11 +1875,20 @@ def _level_from(entry, what: str) -> ForceLevel:
     if _canonical(entry["label"]) is None:
         raise RecordingError(f"{what}: 'label' must be one of {', '.join(CARRIAGE_LABELS)}, got {entry['label']!r}")
     pos, direction = entry.get("hit_position_m"), entry.get("hit_direction")
+    forces, band = entry.get("hit_forces_n"), entry.get("band_hz")
+    if forces is not None and (not isinstance(forces, list) or not forces):
+        raise RecordingError(f"{what}: 'hit_forces_n' must be a list of positive numbers, got {forces!r}")
+    if band is not None and (not isinstance(band, list) or len(band) != 2):
+        raise RecordingError(f"{what}: 'band_hz' must be [low, high], got {band!r}")
+    # frequency_hz null: identify's refit of the bin's hits did not reproduce the mode
     return ForceLevel(
         peak_force_n=_number(entry["peak_force_n"], f"{what}: 'peak_force_n'"),
         label=str(entry["label"]),
-        frequency_hz=_number(entry["frequency_hz"], f"{what}: 'frequency_hz'"),
-        frequency_std_hz=_std_of(entry, what),
+        frequency_hz=_number(entry["frequency_hz"], f"{what}: 'frequency_hz'", allow_none=True),
+        frequency_std_hz=None if entry["frequency_hz"] is None else _std_of(entry, what),
+        hit_forces_n=None if forces is None else tuple(_number(x, f"{what}: 'hit_forces_n'") for x in forces),
+        band_hz=None if band is None else tuple(_number(x, f"{what}: 'band_hz'") for x in band),
+        shape=_shape(entry.get("shape"), f"{what}: 'shape'"),
         hit_position_m=None if pos is None else _vector3(pos, f"{what}: 'hit_position_m'"),
         hit_direction=None if direction is None else _vector3(direction, f"{what}: 'hit_direction'"),
         pulse_s=_number(entry.get("pulse_s"), f"{what}: 'pulse_s'", allow_none=True),
