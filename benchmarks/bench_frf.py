@@ -9,7 +9,9 @@ written with guidefit's writer (first copies) and grown with h5py.
 
 Each variant runs in its own child process under ``/usr/bin/time -v`` (peak
 RSS of the whole process, imports included); the child times its own work
-(file open to FRF, imports excluded) and reports it as JSON. The file is
+(file open to FRF, imports excluded) and reports it as JSON. The variants
+run round after round (5 rounds; the median is shown), so that a change in
+the load of a shared machine falls on all of them alike. The file is
 read once before the runs, so every variant reads from the page cache.
 
 Variants:
@@ -263,22 +265,29 @@ def agreement(path: Path, n_check: int = 10) -> str:
 # --------------------------------------------------------------------------- main
 
 
-def run_variant(name: str, path: Path, repeat: int) -> dict:
-    results = []
-    for _ in range(repeat):
-        m = C.measure(C.python_cmd(SCRIPT, "--worker", name, str(path)))
-        if m["returncode"] != 0 or m["child"] is None:
-            raise RuntimeError(f"variant {name} failed:\n{m['stderr'][-2000:]}")
-        results.append(m)
-    best = sorted(results, key=lambda m: m["child"]["seconds"])[len(results) // 2]   # median
+def run_once(name: str, path: Path) -> dict:
+    m = C.measure(C.python_cmd(SCRIPT, "--worker", name, str(path)))
+    if m["returncode"] != 0 or m["child"] is None:
+        raise RuntimeError(f"variant {name} failed:\n{m['stderr'][-2000:]}")
+    return m
+
+
+def median_run(results: list[dict]) -> dict:
+    """The run with the median time, with every run's time in ``all_seconds``."""
+    best = sorted(results, key=lambda m: m["child"]["seconds"])[len(results) // 2]
     best["all_seconds"] = [m["child"]["seconds"] for m in results]
     return best
+
+
+def run_variant(name: str, path: Path, repeat: int) -> dict:
+    return median_run([run_once(name, path) for _ in range(repeat)])
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="20 hits (200 for the memory run)")
-    ap.add_argument("--repeat", type=int, default=None, help="runs per variant (median shown)")
+    ap.add_argument("--repeat", type=int, default=None,
+                    help="rounds of every variant (median shown; default 5, 1 with --quick)")
     ap.add_argument("--worker", nargs=2, metavar=("VARIANT", "FILE"), help=argparse.SUPPRESS)
     ap.add_argument("--keep", action="store_true", help="keep the generated files")
     args = ap.parse_args()
@@ -294,7 +303,7 @@ def main() -> None:
         return
 
     n_sim, n_hits, n_big = (4, 20, 200) if args.quick else (10, 100, 1000)
-    repeat = args.repeat or (1 if args.quick else 3)
+    repeat = args.repeat or (1 if args.quick else 5)
     C.print_machine()
     need_gb = n_big * RECORD_S * FS * 5 * 4 / 1e9 * 1.05
     C.BENCH_DIR.mkdir(parents=True, exist_ok=True)
@@ -317,12 +326,16 @@ def main() -> None:
         if importlib.util.find_spec("pyFRF") is None:
             print("pyFRF is not installed (`pip install pyFRF==1.5.0`): its row is skipped\n")
             names.remove("pyfrf")
-        task = bar.add_task("variants", total=len(names) + 1)
-        res = {}
-        for name in names:
-            bar.update(task, description=f"{name} x{repeat}")
-            res[name] = run_variant(name, path, repeat)
-            bar.advance(task)
+        # round after round of every variant, so that a change in the load of
+        # a shared machine falls on all variants alike
+        task = bar.add_task("variants", total=len(names) * repeat + 1)
+        runs = {name: [] for name in names}
+        for k in range(repeat):
+            for name in names:
+                bar.update(task, description=f"{name}, round {k + 1}/{repeat}")
+                runs[name].append(run_once(name, path))
+                bar.advance(task)
+        res = {name: median_run(runs[name]) for name in names}
         bar.update(task, description=f"guidefit, {n_big} hits")
         res_big = run_variant("guidefit", big, 1)
         bar.advance(task)
@@ -330,7 +343,7 @@ def main() -> None:
     n_samples = res["floor32"]["child"]["n_samples"]
     print(f"{n_hits} hits x {RECORD_S} s x 5 channels at {FS / 1e3:.0f} kHz = "
           f"{n_samples / 1e6:.0f} Msamples ({path.stat().st_size / 1e6:.0f} MB float32), "
-          f"page cache warm; seconds = median of {repeat} run(s) in a fresh process, "
+          f"page cache warm; seconds = median of {repeat} run(s) in a fresh process, variants interleaved, "
           "work only (imports excluded); RSS = peak of the whole process\n")
     f32 = res["floor32"]["child"]["seconds"]
     f64 = res["floor64"]["child"]["seconds"]
