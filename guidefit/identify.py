@@ -165,6 +165,11 @@ class Identification:
     warnings: tuple
     extra_modes: tuple = ()
     missing_modes: tuple = ()
+    failed_run_hits: tuple = ()  # hit rows of runs that gave no FRF (every hit rejected)
+
+    def hit_rows(self) -> list[dict]:
+        """Every hit of every run, accepted or rejected, including runs that gave no FRF."""
+        return [row for run in self.runs for row in run.hits] + list(self.failed_run_hits)
 
     def to_dict(self) -> dict:
         """The contract's JSON object (``identify --json``), with optional extra fields."""
@@ -176,7 +181,7 @@ class Identification:
             "warnings": list(self.warnings),
             "extra_modes": [m.to_dict() for m in self.extra_modes],
             "missing_modes": list(self.missing_modes),
-            "hits": [row for run in self.runs for row in run.hits],
+            "hits": self.hit_rows(),
             "sensors": [
                 {"name": ch.name, "position_m": [float(x) for x in ch.position_m],
                  "direction": [float(x) for x in ch.direction]}
@@ -616,8 +621,10 @@ def _quality_warnings(modes, settings, warnings: list) -> None:
                             f"the curve-fit damping is the one to trust")
 
 
-def run_frfs(recording, settings: IdentifySettings, warnings: list):
+def run_frfs(recording, settings: IdentifySettings, warnings: list, failed: list | None = None):
     """Yield (run, FrfSet, hit rows) for every run that gives an FRF; problems go to ``warnings``.
+
+    The hit rows of a run that gives no FRF are added to ``failed`` (when given).
 
     Hits stream from the file into the spectral sums (bounded memory); each
     rejected hit is listed with its reason.
@@ -626,6 +633,11 @@ def run_frfs(recording, settings: IdentifySettings, warnings: list):
     from guidefit.hits import HitSettings, iter_hits
 
     for run in recording.runs:
+        if not run.response_indices:
+            from guidefit.errors import RecordingError
+
+            raise RecordingError(f"{run.file}: run '{run.name}': no acceleration channel; an FRF needs "
+                                 "'force' and at least one 'acc_<point>_<axis>'")
         rows: list[dict] = []
 
         def tapped(it, rows=rows, run=run):
@@ -639,7 +651,10 @@ def run_frfs(recording, settings: IdentifySettings, warnings: list):
         try:
             frf = compute_frf(run, hits, estimator=settings.estimator, window=settings.window or WindowSettings())
         except IdentificationError as exc:
-            warnings.append(f"run '{run.name}': {exc}")
+            text = str(exc)
+            warnings.append(text if text.startswith(f"run '{run.name}'") else f"run '{run.name}': {text}")
+            if failed is not None:
+                failed.extend(rows)
             continue
         n_ok = sum(r["accepted"] for r in rows)
         if n_ok < settings.min_accepted_hits:
@@ -677,7 +692,8 @@ def identify(path, guide=None, settings: IdentifySettings | None = None) -> Iden
     warnings: list[str] = []
     runs = []
     all_modes: list[IdentifiedMode] = []
-    for run, frf, rows in run_frfs(recording, settings, warnings):
+    failed_rows: list[dict] = []
+    for run, frf, rows in run_frfs(recording, settings, warnings, failed_rows):
         modes = _fit_run(run, frf, guide, model, settings, warnings)
         all_modes.extend(modes)
         levels = _force_levels(run, frf, rows, modes, settings, warnings) if settings.force_levels else []
@@ -695,7 +711,7 @@ def identify(path, guide=None, settings: IdentifySettings | None = None) -> Iden
     _quality_warnings(modes, settings, warnings)
     params = joint_parameters(guide.mass_kg, joint)
     return Identification(str(path), guide, tuple(runs), tuple(modes), params, tuple(warnings),
-                          tuple(extras), tuple(missing))
+                          tuple(extras), tuple(missing), tuple(failed_rows))
 
 
 

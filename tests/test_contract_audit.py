@@ -1,0 +1,231 @@
+"""Conformance audit against shared/recording-format.md with an independent writer.
+
+The recordings come from ``_contract_gen`` (numpy + h5py only, no guidefit
+code): the pinned nominal MRB35 rigid body on its roller springs, half-sine
+hits, exact modal superposition. So the right answers are known without
+guidefit's simulator: f_V = 3529.0 Hz, f_H (roll_low) = 2496.5 Hz, every
+modal damping ratio 0.02, and the FRFs themselves.
+"""
+
+import json
+import subprocess
+import sys
+
+import _contract_gen as gen
+import h5py
+import numpy as np
+import pytest
+
+from guidefit.identify import IdentifySettings, frf_of_recording, identify
+
+FREQS, _ = gen.modes()
+F_V, F_H = FREQS[3], FREQS[2]
+FAST = IdentifySettings(jackknife=False)
+
+
+def cli(*args):
+    proc = subprocess.run([sys.executable, "-m", "guidefit", *map(str, args)], capture_output=True, text=True,
+                          timeout=300, check=False)
+    return proc.returncode, proc.stdout, proc.stderr
+
+
+def test_generator_reproduces_the_pinned_nominal_frequencies():
+    # physics-notes: yaw 1879.1, pitch 2275.9, roll_low 2496.4, vertical 3529.0, roll_high 5563.6 Hz
+    assert FREQS == pytest.approx([1879.1, 2275.9, 2496.4, 3529.0, 5563.6], abs=0.1)
+
+
+def _two_runs(n_hits=2, n=4000, fs=200_000.0, **kw):
+    out = {}
+    for i, run in enumerate(("vertical", "lateral")):
+        chans, data = gen.run_hits(run, n_hits=n_hits, n=n, fs=fs, seed=i)
+        out[run] = dict(chans=chans, data=data, fs=fs, direction=gen.RUNS[run][1],
+                        position=gen.RUNS[run][0], **kw)
+    return out
+
+
+def _reorder(spec, order_of):
+    for r in spec.values():
+        order = order_of(len(r["chans"]))
+        r["chans"] = [r["chans"][i] for i in order]
+        r["data"] = r["data"][..., order]
+    return spec
+
+
+def _flip(spec, names=("acc_A_y", "acc_C_x")):
+    # sensors mounted the other way round: direction and reading both change sign
+    for r in spec.values():
+        for i, (name, pos, d) in enumerate(r["chans"]):
+            if name in names:
+                r["chans"][i] = (name, pos, tuple(-np.asarray(d)))
+                r["data"][..., i] *= -1
+    return spec
+
+
+def _signals(spec):
+    for r in spec.values():
+        gap = np.zeros((2000, r["data"].shape[-1]))
+        r["data"] = np.concatenate([np.concatenate([gap, h]) for h in r["data"]] + [gap])
+        r["layout"] = "signals"
+    return spec
+
+
+VARIANTS = {
+    "hits_float64": lambda: (_two_runs(pretrigger=200), {}),
+    "hits_float32_g": lambda: (_two_runs(dtype=np.float32, units=["N"] + ["g"] * 8), {}),
+    "signals_lzf_chunked": lambda: (_signals(_two_runs(chunks=(777, 9), compression="lzf")), {}),
+    "fixed_length_strings_no_optional": lambda: (_two_runs(str_kind="fixed"), {"guide": None}),
+    "force_last_shuffled": lambda: (_reorder(_two_runs(), lambda n: list(np.random.default_rng(3).permutation(n))),
+                                    {}),
+    "flipped_sensors": lambda: (_flip(_two_runs()), {}),
+    "odd_length_gzip": lambda: (_two_runs(n=3999, chunks=(1, 500, 9), compression="gzip"), {}),
+    "fs_51200": lambda: (_two_runs(n=1024, fs=51_200.0), {}),
+    "free_run_names": lambda: ({"run 01": _two_runs()["vertical"], "ünï.2": _two_runs()["lateral"]}, {}),
+}
+
+
+@pytest.mark.parametrize("name", sorted(VARIANTS))
+def test_conforming_variant_gives_the_true_modes(tmp_path, name):
+    spec, root = VARIANTS[name]()
+    path = gen.write_file(tmp_path / f"{name}.h5", spec, **root)
+    result = identify(path, settings=FAST)
+    p = result.parameters
+    # noise 0.2 % of peak, exact modal data: the fit lands within 0.02 % (0.7 Hz) and 1 % in damping
+    assert p["f_V"]["value"] == pytest.approx(F_V, rel=2e-4)
+    assert p["f_H"]["value"] == pytest.approx(F_H, rel=2e-4)
+    assert p["zeta_V"]["value"] == pytest.approx(0.02, rel=0.01)
+    assert p["K_V"]["value"] == pytest.approx(4 * np.pi ** 2 * gen.M * F_V ** 2, rel=4e-4)
+    assert not [h for h in result.hit_rows() if not h["accepted"]]
+
+
+def test_g_file_gives_the_same_frf_as_the_si_file_and_both_the_true_one(tmp_path):
+    si = gen.write_file(tmp_path / "si.h5", _two_runs())
+    in_g = _two_runs(units=["N"] + ["g", "m/s^2"] * 4)
+    g_path = gen.write_file(tmp_path / "g.h5", in_g)
+    with h5py.File(g_path) as f:  # really stored in g: 9.80665 times smaller numbers
+        with h5py.File(si) as f_si:
+            ratio = f_si["runs/vertical/hits"][0, :, 1] / f["runs/vertical/hits"][0, :, 1]
+            assert np.nanmedian(ratio) == pytest.approx(gen.G, rel=1e-12)
+    a, _ = frf_of_recording(si, FAST)
+    b, _ = frf_of_recording(g_path, FAST)
+    for fa, fb in zip(a, b):
+        np.testing.assert_allclose(fb.H, fa.H, rtol=1e-9, atol=1e-12 * np.abs(fa.H).max())
+    vertical = next(s for s in a if s.run == "vertical")
+    k = vertical.channels.index("acc_A_y")
+    f = np.asarray(vertical.frequency_hz)
+    band = (f > 1500) & (f < 6000)
+    truth = gen.accel_frf(f[band], [gen.sensor_row(gen.POINTS["A"], gen.AXES["y"])],
+                          gen.sensor_row(*gen.RUNS["vertical"]), np.full(5, 0.02))[:, 0]
+    measured = np.asarray(vertical.H)[band, k]
+    # windowing and 0.2 % noise: within 3 % of the analytic FRF (m/s^2/N) across the modes
+    assert np.median(np.abs(measured / truth - 1)) < 0.03
+
+
+# ----------------------------------------------------------------- defects found by the audit
+
+
+def _all_hits_rejected_in_vertical(tmp_path):
+    spec = _two_runs(n_hits=3)
+    spec["vertical"]["data"][..., 0] *= -1  # every vertical hit pushes against excitation_direction
+    return gen.write_file(tmp_path / "neg.h5", spec)
+
+
+def test_hits_of_a_run_without_frf_are_listed_as_rejected(tmp_path):
+    """Was: a run whose hits were all rejected vanished from the hit table and the JSON ``hits``.
+
+    The table said "hits: 2 accepted, 0 rejected" for a file with 3 rejected hits.
+    """
+    path = _all_hits_rejected_in_vertical(tmp_path)
+    result = identify(path, settings=FAST)
+    rows = result.hit_rows()
+    vertical = [h for h in rows if h["run"] == "vertical"]
+    assert len(vertical) == 3 and not any(h["accepted"] for h in vertical)
+    assert all(h["reason"].startswith("negative") for h in vertical)
+    assert result.to_dict()["hits"] == rows
+    assert result.parameters["f_V"]["value"] is None  # nothing made up from the rejected run
+    assert result.parameters["f_H"]["value"] == pytest.approx(F_H, rel=2e-4)
+    code, out, err = cli("identify", path)
+    assert code == 0, err
+    assert "hits: 3 accepted, 3 rejected" in out
+
+
+def test_warning_of_a_failed_run_names_the_run_once(tmp_path):
+    """Was: "run 'vertical': run 'vertical': no accepted hit to average"."""
+    result = identify(_all_hits_rejected_in_vertical(tmp_path), settings=FAST)
+    failed = [w for w in result.warnings if "no accepted hit" in w]
+    assert failed and all(w.count("run 'vertical'") == 1 for w in failed)
+
+
+PARAMETER_UNITS = {"f_V": "Hz", "zeta_V": "1", "K_V": "N/m", "c_V": "N*s/m",
+                   "f_H": "Hz", "zeta_H": "1", "K_H": "N/m", "c_H": "N*s/m"}
+
+
+def test_identify_json_has_the_contract_fields_for_every_file_even_a_failed_one(tmp_path):
+    """Was: a file without a result printed ``"parameters": {}`` and no ``guide``."""
+    good = gen.write_file(tmp_path / "good.h5", _two_runs())
+    spec = _two_runs()
+    for r in spec.values():
+        r["data"][..., 0] *= -1
+    rejected = gen.write_file(tmp_path / "all_rejected.h5", spec)
+    folder = tmp_path / "folder.h5"
+    folder.mkdir()
+    files = [good, rejected, folder, tmp_path / "missing.h5"]
+    code, out, err = cli("identify", *files, "--json")
+    lines = out.strip().splitlines()
+    assert len(lines) == len(files)  # one JSON line per input file, a directory included
+    objs = [json.loads(line) for line in lines]
+    assert [o["file"] for o in objs] == [str(f) for f in files]
+    for o in objs:
+        assert set(o["parameters"]) == set(PARAMETER_UNITS)
+        for name, unit in PARAMETER_UNITS.items():
+            assert o["parameters"][name]["unit"] == unit and "std" in o["parameters"][name]
+        assert isinstance(o["modes"], list) and isinstance(o["warnings"], list)
+    assert objs[0]["guide"] == "MRB35" and objs[0]["parameters"]["f_V"]["value"] == pytest.approx(F_V, rel=2e-4)
+    assert objs[1]["guide"] == "MRB35" and objs[1]["exit_code"] == 1
+    assert all(p["value"] is None for o in objs[1:] for p in o["parameters"].values())
+    assert objs[2]["exit_code"] == 2 and "is a directory" in objs[2]["error"]
+    assert objs[3]["exit_code"] == 2 and objs[3]["guide"] is None
+    assert code == 2
+    # one line per failed file, nothing else (was: a blank line left by the progress bar)
+    assert err.count("\n") == 3 and all(line.startswith("guidefit: error: ") for line in err.splitlines())
+
+
+@pytest.mark.parametrize("args", [
+    ("identify",),
+    ("identify", "--no-such-option", "x.h5"),
+    ("no-such-command",),
+    ("frf", "DIR"),
+    ("identify", "x.h5", "--jobs", "0"),
+    ("frf", "x.h5", "--window", "force=abc"),
+])
+def test_usage_errors_are_one_line(tmp_path, args):
+    """Was: click's three-line usage block ("Usage: ...", "Try ...", "Error: ...")."""
+    args = [str(tmp_path) if a == "DIR" else a for a in args]
+    code, _, err = cli(*args)
+    lines = err.strip().splitlines()
+    assert code == 2
+    assert len(lines) == 1 and lines[0].startswith("guidefit: error: "), err
+
+
+def test_unknown_guide_named_by_a_file_says_which_file(tmp_path):
+    """Was: "guide 'MRB99': not a built-in guide ..." without the file that named it."""
+    path = gen.write_file(tmp_path / "rec.h5", _two_runs(n_hits=1), guide="MRB99")
+    for command in ("identify", "explain"):
+        code, _, err = cli(command, path)
+        assert code == 2
+        assert err.count("\n") == 1 and str(path) in err and "MRB99" in err and "--guide" in err
+    code, _, err = cli("identify", path, "--guide", "MRB35", "--no-jackknife")
+    assert code == 0, err
+
+
+def test_run_without_accelerometer_is_refused_naming_the_file(tmp_path):
+    """Was: "run 'only_force': hit 0 has shape (n, 1); ..." without the file name."""
+    path = tmp_path / "force_only.csv"
+    t = np.arange(400) / 200_000.0
+    force = gen.half_sine(400, 200_000.0, 1e-4, 300.0, 1e-3)
+    lines = ["# sample_rate_hz: 200000", "# excitation_direction: 0 -1 0", "time,force"]
+    lines += [f"{a:.9g},{b:.9g}" for a, b in zip(t, force)]
+    path.write_text("\n".join(lines) + "\n")
+    for command in ("identify", "frf"):
+        code, _, err = cli(command, path)
+        assert code == 2
+        assert err.count("\n") == 1 and str(path) in err and "no acceleration channel" in err
