@@ -1074,7 +1074,9 @@ def _check_version(value, where: str) -> None:
 
 
 def _optional_text(attrs, name: str, where: str) -> str:
-    if name not in attrs:
+    import h5py
+
+    if name not in attrs or isinstance(attrs[name], h5py.Empty):  # absent, or present without a value
         return ""
     text = _strings(attrs[name], where, name)
     if text is None or len(text) != 1:

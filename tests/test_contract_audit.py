@@ -34,6 +34,14 @@ def test_generator_reproduces_the_pinned_nominal_frequencies():
     assert FREQS == pytest.approx([1879.1, 2275.9, 2496.4, 3529.0, 5563.6], abs=0.1)
 
 
+def test_predict_agrees_with_the_independent_nominal_model():
+    import guidefit
+
+    frame = guidefit.predict(guidefit.load_guide("MRB35")).modes.to_frame()
+    assert list(frame["label"]) == ["yaw", "pitch", "roll_low", "vertical", "roll_high"]
+    np.testing.assert_allclose(frame["frequency_hz"], FREQS, rtol=1e-9)
+
+
 def _two_runs(n_hits=2, n=4000, fs=200_000.0, **kw):
     out = {}
     for i, run in enumerate(("vertical", "lateral")):
@@ -229,3 +237,22 @@ def test_run_without_accelerometer_is_refused_naming_the_file(tmp_path):
         code, _, err = cli(command, path)
         assert code == 2
         assert err.count("\n") == 1 and str(path) in err and "no acceleration channel" in err
+
+
+def test_optional_text_attribute_without_a_value_counts_as_absent(tmp_path):
+    """Was: exit 2 for ``guide``/``description`` stored with a null dataspace (h5py.Empty).
+
+    Some HDF5 writers store an empty string that way; for an optional attribute that is
+    "not given", not a malformed file. A required attribute stored so is still refused.
+    """
+    path = gen.write_file(tmp_path / "rec.h5", _two_runs(n_hits=1))
+    with h5py.File(path, "a") as f:
+        f.attrs["guide"] = h5py.Empty("S10")
+        f.attrs["description"] = h5py.Empty("S1")
+    result = identify(path, settings=FAST)
+    assert result.guide.name == "MRB35"
+    assert result.parameters["f_V"]["value"] == pytest.approx(F_V, rel=2e-4)
+    with h5py.File(path, "a") as f:
+        f.attrs["format"] = h5py.Empty("S4")
+    code, _, err = cli("identify", path)
+    assert code == 2 and err.count("\n") == 1 and "'format'" in err
