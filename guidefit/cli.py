@@ -53,7 +53,8 @@ class _Group(click.Group):
             click.echo(f"guidefit: error: {exc}", err=True)
             sys.exit(exc.exit_code)
         except OSError as exc:
-            click.echo(f"guidefit: error: {exc.filename or ''}: {exc.strerror or exc}", err=True)
+            where = f"{exc.filename}: " if exc.filename else ""
+            click.echo(f"guidefit: error: {where}{exc.strerror or exc}", err=True)
             sys.exit(2)
         except KeyboardInterrupt:
             click.echo("guidefit: interrupted", err=True)

@@ -416,6 +416,9 @@ def _with_jackknife(modes: list, frf_by_run: dict) -> list:
     return out
 
 
+MIN_BINS_IN_BAND = 8  # fewer FRF bins than this in the search band: no mode fit is attempted
+
+
 def _fit_run(run, frf, guide, model, settings, warnings: list) -> list[IdentifiedMode]:
     from guidefit import frf as frf_mod
     from guidefit import modes as modes_mod
@@ -425,6 +428,13 @@ def _fit_run(run, frf, guide, model, settings, warnings: list) -> list[Identifie
     if not band[1] > band[0] * 1.05:
         warnings.append(f"run '{run.name}': sample rate {run.sample_rate_hz:g} Hz too low for the modes "
                         f"searched from {band[0]:.0f} Hz (needs at least {band[0] / 0.4:.0f} Hz)")
+        return []
+    freq = np.asarray(frf.frequency_hz)
+    if np.count_nonzero((freq >= band[0]) & (freq <= band[1])) < MIN_BINS_IN_BAND:
+        n = 2 * (len(freq) - 1)
+        warnings.append(f"run '{run.name}': records of about {n} samples give {freq[-1] / max(len(freq) - 1, 1):.0f} Hz "
+                        f"resolution, too coarse for the modes between {band[0]:.0f} and {band[1]:.0f} Hz "
+                        f"(fewer than {MIN_BINS_IN_BAND} bins); longer records are needed")
         return []
     try:
         import warnings as _w
@@ -707,7 +717,9 @@ def identify(path, guide=None, settings: IdentifySettings | None = None) -> Iden
         modes = _with_jackknife(modes, {r.name: r.frf for r in runs})
     joint = {k: next((m for m in modes if m.label == lab), None) for k, lab in JOINT_LABELS.items()}
     if joint["V"] is None and joint["H"] is None:
-        raise IdentificationError(f"{path}: neither the vertical nor the horizontal joint mode was found")
+        why = [w for w in warnings if " hit " not in w.split(":", 1)[0]]  # run-level reasons, not each hit
+        raise IdentificationError(f"{path}: neither the vertical nor the horizontal joint mode was found"
+                                  + (f" ({'; '.join(why)})" if why else ""))
     _quality_warnings(modes, settings, warnings)
     params = joint_parameters(guide.mass_kg, joint)
     return Identification(str(path), guide, tuple(runs), tuple(modes), params, tuple(warnings),

@@ -256,3 +256,24 @@ def test_optional_text_attribute_without_a_value_counts_as_absent(tmp_path):
         f.attrs["format"] = h5py.Empty("S4")
     code, _, err = cli("identify", path)
     assert code == 2 and err.count("\n") == 1 and "'format'" in err
+
+
+def test_records_too_short_for_any_mode_fail_cleanly(tmp_path):
+    """Was: "internal error: ValueError: frequency_hz must be 1-D with at least 3 bins" for 2-sample hits."""
+    spec = _two_runs(n=2000)
+    for r in spec.values():
+        r["data"] = r["data"][:, 195:197]  # 2 samples around the pulse start, no pretrigger attribute
+    path = gen.write_file(tmp_path / "two_samples.h5", spec)
+    code, out, err = cli("identify", path, "--json", "--no-jackknife")
+    assert code == 1, err
+    assert err.count("\n") == 1 and "internal error" not in err and "too coarse" in err
+    obj = json.loads(out)
+    assert obj["exit_code"] == 1 and all(p["value"] is None for p in obj["parameters"].values())
+
+
+def test_output_error_without_a_file_name_has_no_empty_prefix(tmp_path):
+    """Was: "guidefit: error: : Cannot save file into a non-existent directory: ..."."""
+    path = gen.write_file(tmp_path / "rec.h5", _two_runs(n_hits=1))
+    code, _, err = cli("identify", path, "--no-jackknife", "--summary", tmp_path / "no" / "such" / "dir" / "s.csv")
+    assert code == 2
+    assert err.count("\n") == 1 and err.startswith("guidefit: error: ") and not err.startswith("guidefit: error: :")
