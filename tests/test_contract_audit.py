@@ -277,3 +277,39 @@ def test_output_error_without_a_file_name_has_no_empty_prefix(tmp_path):
     code, _, err = cli("identify", path, "--no-jackknife", "--summary", tmp_path / "no" / "such" / "dir" / "s.csv")
     assert code == 2
     assert err.count("\n") == 1 and err.startswith("guidefit: error: ") and not err.startswith("guidefit: error: :")
+
+
+def _explain_json(path):
+    code, out, err = cli("explain", path, "--json")
+    assert code == 0, err
+    lines = out.strip().splitlines()
+    assert len(lines) == 1  # one JSON object
+    d = json.loads(lines[0])
+    assert d["file"] == str(path) and d["verdict"] in ("adequate", "explained", "unexplained")
+    for key in ("error_before", "error_after"):
+        assert isinstance(d[key]["rms_frequency_error_pct"], float)
+    for m in d["modes"]:
+        assert isinstance(m["label"], str) and isinstance(m["measured_hz"], float)
+        assert {"model_before_hz", "model_after_hz"} <= set(m)
+    for e in d["effects"]:
+        assert isinstance(e["name"], str)
+        assert all({"value", "std"} <= set(p) for p in e["parameters"].values())
+    return d
+
+
+def test_explain_on_independent_data_nominal_and_added_mass(tmp_path):
+    """The nominal carriage is 'adequate' with no effect; 0.1 kg at the centre (in g units) is found."""
+    nominal = _explain_json(gen.write_file(tmp_path / "nominal.h5", _two_runs(n_hits=2)))
+    assert nominal["verdict"] == "adequate" and nominal["effects"] == []
+    assert nominal["error_before"]["rms_frequency_error_pct"] < 0.05
+    spec = {}
+    for i, run in enumerate(("vertical", "lateral")):
+        chans, data = gen.run_hits(run, n_hits=2, n=4000, seed=i, mass=gen.M + 0.1)
+        spec[run] = dict(chans=chans, data=data, fs=200_000.0, direction=gen.RUNS[run][1],
+                         position=gen.RUNS[run][0], units=["N"] + ["g"] * 8)
+    heavy = _explain_json(gen.write_file(tmp_path / "heavy.h5", spec))
+    # a centre mass shifts only the translational modes: vertical 3529 -> 3451 Hz (-2.2 %)
+    assert heavy["verdict"] == "explained"
+    assert [e["name"] for e in heavy["effects"]] == ["added_mass"]
+    assert heavy["effects"][0]["parameters"]["mass_kg"]["value"] == pytest.approx(0.1, abs=0.005)
+    assert heavy["error_after"]["rms_frequency_error_pct"] < 0.05 < heavy["error_before"]["rms_frequency_error_pct"]
