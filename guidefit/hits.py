@@ -414,6 +414,9 @@ def _check(
     return Hit(run.name, index, start_sample, data, peak, True, None, trigger, (), metrics)
 
 
+_ABSURD_SAMPLE = 1e100  # |sample| at or beyond this is corrupt (non_finite); its square overflows
+
+
 def _assess(data, run: Run, s: HitSettings, pre: int | None, median_peak, force_base=None):
     """(codes, reasons, signed peak, pretrigger, metrics) of one record.
 
@@ -428,15 +431,17 @@ def _assess(data, run: Run, s: HitSettings, pre: int | None, median_peak, force_
     columns = np.ascontiguousarray(data.T)  # one contiguous row per channel: cheaper passes
     # max and min of each channel: NaN if it holds a NaN, +-Inf if an Inf
     tops, bottoms = columns.max(axis=1), columns.min(axis=1)
-    if not (np.isfinite(tops).all() and np.isfinite(bottoms).all()):
-        finite = np.isfinite(data)
+    # a sample beyond +-1e100 (a corrupt one: no force or acceleration comes near) would overflow the spectra
+    if not (np.all(np.abs(tops) < _ABSURD_SAMPLE) and np.all(np.abs(bottoms) < _ABSURD_SAMPLE)):
+        finite = np.abs(data) < _ABSURD_SAMPLE  # False for NaN too
         bad = [names[c] for c in np.flatnonzero(~finite.all(axis=0))]
         force = data[:, fi][finite[:, fi]]
         peak = _signed_extreme(force - np.median(force)) if force.size else math.nan
         count = int((~finite).sum())
         return (
             ["non_finite"],
-            [f"non_finite: {count} NaN/Inf sample(s) in {', '.join(bad)}"],
+            [f"non_finite: {count} NaN/Inf{'' if count == (~np.isfinite(data)).sum() else ' or corrupt (beyond 1e100)'} "
+             f"sample(s) in {', '.join(bad)}"],
             peak,
             pre,
             metrics,
@@ -844,12 +849,12 @@ def _stored_hits(run: Run, s: HitSettings, length: int) -> Iterator[Hit]:
 
 
 def _force_stats(run: Run, chunk: int, reader) -> tuple[float, float, float]:
-    """(mean, max, min) of the finite force samples, streamed."""
+    """(mean, max, min) of the finite force samples (not corrupt ones, beyond 1e100), streamed."""
     total, count = 0.0, 0
     hi, lo = -math.inf, math.inf
     for start in range(0, run.n_samples, chunk):
         f = reader.read_block(start, min(run.n_samples, start + chunk), [run.force_index])[:, 0]
-        f = f[np.isfinite(f)]
+        f = f[np.abs(f) < _ABSURD_SAMPLE]
         if f.size:
             total += float(np.sum(f))
             count += f.size

@@ -631,6 +631,27 @@ def _quality_warnings(modes, settings, warnings: list) -> None:
                             f"the curve-fit damping is the one to trust")
 
 
+MAX_FORCE_DROP_DB = 20.0  # hammer practice: use the band where the force spectrum is within 20 dB of its peak
+
+
+def _excitation_warnings(modes, frf_by_run: dict, warnings: list) -> None:
+    """Warn when a joint mode lies where the hammer barely excites (e.g. a soft tip's spectral notch)."""
+    for m in modes:
+        frf = frf_by_run.get(m.run)
+        sff = (getattr(frf, "group_sums", None) or {}).get("Sff")
+        if m.label not in JOINT_LABELS.values() or sff is None:
+            continue
+        sff = np.sum(np.asarray(sff, dtype=float), axis=0)
+        freq = np.asarray(frf.frequency_hz)
+        peak = float(np.max(sff[freq > 0], initial=0.0))
+        here = float(sff[int(np.argmin(np.abs(freq - m.frequency_hz)))])
+        if peak > 0 and here < peak * 10 ** (-MAX_FORCE_DROP_DB / 10):
+            drop = "no" if here <= 0 else f"{-10 * np.log10(here / peak):.0f} dB less"
+            warnings.append(f"mode {m.label} at {m.frequency_hz:.1f} Hz: the hammer puts {drop} force there than at "
+                            f"its spectral peak (limit {MAX_FORCE_DROP_DB:.0f} dB; a harder tip helps); the frequency "
+                            "and damping may be off by more than their std")
+
+
 def run_frfs(recording, settings: IdentifySettings, warnings: list, failed: list | None = None):
     """Yield (run, FrfSet, hit rows) for every run that gives an FRF; problems go to ``warnings``.
 
@@ -721,6 +742,7 @@ def identify(path, guide=None, settings: IdentifySettings | None = None) -> Iden
         raise IdentificationError(f"{path}: neither the vertical nor the horizontal joint mode was found"
                                   + (f" ({'; '.join(why)})" if why else ""))
     _quality_warnings(modes, settings, warnings)
+    _excitation_warnings(modes, {r.name: r.frf for r in runs}, warnings)
     params = joint_parameters(guide.mass_kg, joint)
     return Identification(str(path), guide, tuple(runs), tuple(modes), params, tuple(warnings),
                           tuple(extras), tuple(missing), tuple(failed_rows))

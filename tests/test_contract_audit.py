@@ -313,3 +313,58 @@ def test_explain_on_independent_data_nominal_and_added_mass(tmp_path):
     assert [e["name"] for e in heavy["effects"]] == ["added_mass"]
     assert heavy["effects"][0]["parameters"]["mass_kg"]["value"] == pytest.approx(0.1, abs=0.005)
     assert heavy["error_after"]["rms_frequency_error_pct"] < 0.05 < heavy["error_before"]["rms_frequency_error_pct"]
+
+
+def _tip(tmp_path, width_s):
+    rng = np.random.default_rng(7)
+    spec = {}
+    for run in ("vertical", "lateral"):
+        pos, d = gen.RUNS[run]
+        chans = [(n, pos if n == "force" else p, d if n == "force" else dd) for n, p, dd in gen.default_channels()]
+        data = np.stack([gen.hit_record(4000, 200_000.0, chans, pos, d, width_s=width_s, noise=0.002, rng=rng)
+                         for _ in range(3)])
+        spec[run] = dict(chans=chans, data=data, fs=200_000.0, direction=d, position=pos)
+    return identify(gen.write_file(tmp_path / f"tip_{width_s}.h5", spec), settings=FAST)
+
+
+def test_soft_hammer_tip_notch_at_a_joint_mode_is_warned(tmp_path):
+    """Was: f_V 15 Hz (0.4 %, 2.3 std) off with no warning when a 1 ms pulse puts a notch at 3.5 kHz.
+
+    A half-sine of width T has spectral zeros at (k + 1/2)/T: 2.5 and 3.5 kHz for T = 1 ms, right at
+    f_H = 2496 Hz and f_V = 3529 Hz. A 0.1 ms pulse is flat (within 3 dB) up to 6 kHz.
+    """
+    soft = _tip(tmp_path, 1e-3)
+    notched = [w for w in soft.warnings if "force there" in w]
+    assert any(w.startswith("mode vertical") for w in notched)
+    assert any(w.startswith("mode roll_low") for w in notched)
+    hard = _tip(tmp_path, 1e-4)
+    assert not [w for w in hard.warnings if "force there" in w]
+    assert hard.parameters["f_V"]["value"] == pytest.approx(F_V, rel=2e-4)
+
+
+@pytest.mark.parametrize("layout", ["hits", "signals"])
+@pytest.mark.parametrize("value", [1e305, -1.7e308, 1e120])
+def test_a_corrupt_huge_sample_rejects_its_hit(tmp_path, layout, value):
+    """Was: "internal error: ValueError: H_channel_or_magnitude contains non-finite values".
+
+    A flipped exponent bit turns a sample into ~1e305: finite, but its square overflows the
+    spectral sums. Such a sample (beyond 1e100) now counts as non_finite; in a continuous record
+    it no longer sets the trigger level either, so the other hits are found and used.
+    """
+    spec = _two_runs(n_hits=3, n=4000)
+    for r in spec.values():
+        if layout == "signals":
+            gap = np.zeros((2000, 9))
+            r["data"] = np.concatenate([np.concatenate([gap, h]) for h in r["data"]] + [gap])
+            r["data"][2000 + 6000 + 900, 0] = value  # in the force of the second hit
+        else:
+            r["data"][1, 900, 3] = value
+        r["layout"] = layout
+    path = gen.write_file(tmp_path / "corrupt.h5", spec)
+    result = identify(path, settings=FAST)
+    rows = result.hit_rows()
+    rejected = [h for h in rows if not h["accepted"]]
+    assert len(rows) == 6 and [h["hit"] for h in rejected] == [1, 1]
+    assert all(h["reason"].startswith("non_finite") for h in rejected)
+    assert result.parameters["f_V"]["value"] == pytest.approx(F_V, rel=2e-4)
+    assert result.parameters["f_H"]["value"] == pytest.approx(F_H, rel=2e-4)
