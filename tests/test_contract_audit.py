@@ -368,3 +368,34 @@ def test_a_corrupt_huge_sample_rejects_its_hit(tmp_path, layout, value):
     assert all(h["reason"].startswith("non_finite") for h in rejected)
     assert result.parameters["f_V"]["value"] == pytest.approx(F_V, rel=2e-4)
     assert result.parameters["f_H"]["value"] == pytest.approx(F_H, rel=2e-4)
+
+
+def _csv(tmp_path, name, meta_lines, header=True):
+    chans, data = gen.run_hits("vertical", n_hits=2, n=3000, seed=0, axes="y")
+    gap = np.zeros((1500, data.shape[-1]))
+    signal = np.concatenate([np.concatenate([gap, h]) for h in data] + [gap])
+    path = tmp_path / name
+    gen.write_csv(path, chans, signal, 200_000.0, (0, -1, 0), meta={}, time_col=False, positions=False)
+    lines = path.read_text().splitlines()
+    path.write_text("\n".join(meta_lines + lines) + "\n")
+    return path
+
+
+def test_csv_key_given_twice_with_another_value_is_refused(tmp_path):
+    """Was: the later '# sample_rate_hz' line silently won: f_V = 1764.5 Hz from a 200 kHz file."""
+    ok = _csv(tmp_path, "once.csv", [])
+    assert identify(ok, settings=FAST).parameters["f_V"]["value"] == pytest.approx(F_V, rel=2e-4)
+    same = _csv(tmp_path, "same_twice.csv", ["# sample_rate_hz: 200000.0"])
+    assert identify(same, settings=FAST).parameters["f_V"]["value"] == pytest.approx(F_V, rel=2e-4)
+    twice = _csv(tmp_path, "twice.csv", ["# Sample_Rate_Hz: 100000"])
+    code, out, err = cli("identify", twice, "--json", "--no-jackknife")
+    assert code == 2 and err.count("\n") == 1
+    assert "'sample_rate_hz': given again" in err and "100000" in err
+    assert json.loads(out)["parameters"]["f_V"]["value"] is None
+
+
+def test_csv_time_column_not_first_says_so(tmp_path):
+    path = tmp_path / "time_last.csv"
+    path.write_text("# sample_rate_hz: 200000\n# excitation_direction: 0 -1 0\nforce,acc_A_y,time\n0,0,0\n1,1,0.000005\n")
+    code, _, err = cli("identify", path)
+    assert code == 2 and err.count("\n") == 1 and "'time' column must be its first column" in err
