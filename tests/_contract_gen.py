@@ -41,10 +41,10 @@ def stiffness(kn=KN):
     return K
 
 
-def modes(kn=KN, mass=M):
+def modes(kn=KN, mass=M, k_support=None):
     """(frequencies Hz, mass-normalised shapes 5 x 5 columns), ascending."""
     m = np.array([mass, mass, *J])
-    K = stiffness(kn)
+    K = stiffness(kn) if k_support is None else stiffness_with_lateral_support(k_support, kn)
     Kt = K / np.sqrt(np.outer(m, m))
     w2, v = np.linalg.eigh(Kt)
     return np.sqrt(w2) / (2 * np.pi), v / np.sqrt(m)[:, None]
@@ -54,9 +54,9 @@ def sensor_row(position, direction):
     return _g(np.asarray(position, float), np.asarray(direction, float))
 
 
-def accel_frf(freqs_hz, rows_out, row_in, zetas, kn=KN, mass=M):
+def accel_frf(freqs_hz, rows_out, row_in, zetas, kn=KN, mass=M, k_support=None):
     """Acceleration per force FRF (m/s^2/N), one column per output row."""
-    f, phi = modes(kn, mass)
+    f, phi = modes(kn, mass, k_support)
     w = 2 * np.pi * np.asarray(freqs_hz)[:, None]
     out = np.zeros((len(freqs_hz), len(rows_out)), complex)
     for r in range(5):
@@ -74,7 +74,7 @@ def half_sine(n, fs, width_s, peak, start):
 
 
 def hit_record(n, fs, channels, hit_pos, hit_dir, peak=300.0, width_s=1e-4, pre=200, zetas=None,
-               noise=0.0, rng=None, kn=KN, mass=M):
+               noise=0.0, rng=None, kn=KN, mass=M, k_support=None):
     """One hit: (n, n_channels) in SI (N, m/s^2); channels = list of (name, position, direction)."""
     zetas = np.full(5, 0.02) if zetas is None else np.asarray(zetas)
     npad = 4 * n
@@ -82,7 +82,7 @@ def hit_record(n, fs, channels, hit_pos, hit_dir, peak=300.0, width_s=1e-4, pre=
     F = np.fft.rfft(force)
     freqs = np.fft.rfftfreq(npad, 1 / fs)
     outs = [(i, sensor_row(p, d)) for i, (name, p, d) in enumerate(channels) if name.startswith("acc")]
-    H = accel_frf(freqs, [r for _, r in outs], sensor_row(hit_pos, hit_dir), zetas, kn, mass)
+    H = accel_frf(freqs, [r for _, r in outs], sensor_row(hit_pos, hit_dir), zetas, kn, mass, k_support)
     rec = np.zeros((n, len(channels)))
     for i, (name, _, _) in enumerate(channels):
         if name == "force":
@@ -110,14 +110,14 @@ RUNS = {
 
 
 def run_hits(run="vertical", n_hits=4, n=8000, fs=200_000.0, seed=0, axes="xy", zetas=None, noise=0.002,
-             kn=KN, mass=M, peaks=None, channels=None):
+             kn=KN, mass=M, peaks=None, channels=None, k_support=None):
     rng = np.random.default_rng(seed)
     pos, d = RUNS[run]
     chans = channels or default_channels(axes)
     chans = [(name, pos if name == "force" else p, d if name == "force" else dd) for name, p, dd in chans]
     peaks = peaks if peaks is not None else rng.uniform(200, 400, n_hits)
     data = np.stack([hit_record(n, fs, chans, pos, d, peak=pk, zetas=zetas, noise=noise, rng=rng, kn=kn,
-                                mass=mass) for pk in peaks])
+                                mass=mass, k_support=k_support) for pk in peaks])
     return chans, data
 
 
@@ -221,3 +221,21 @@ def write_csv(path, chans, data, fs, direction, meta=None, time_col=True, units=
     with open(path, "w", encoding="utf-8-sig" if bom else "utf-8", newline="") as fh:
         fh.write(text)
     return path
+
+
+def stiffness_with_lateral_support(k_support, kn=KN):
+    """5x5 carriage stiffness with the rail on a lateral spring to ground (massless rail, condensed).
+
+    The rail moves as a rigid body along x only (r); each roller spring acts on the normal
+    component of carriage motion minus rail motion: g_c . q - n_x r.
+    """
+    h3 = H1 + H0
+    c, s = np.cos(BETA), np.sin(BETA)
+    rows = [((-E, -H1), (c, s)), ((E, -H1), (-c, s)), ((-E, -h3), (c, -s)), ((E, -h3), (-c, -s))]
+    K = np.zeros((6, 6))
+    for (x, y), (nx, ny) in rows:
+        for z in np.linspace(-LL / 2, LL / 2, ZL):
+            g = np.append(_g(np.array([x, y, z]), np.array([nx, ny, 0.0])), -nx)
+            K += kn * np.outer(g, g)
+    K[5, 5] += k_support
+    return K[:5, :5] - np.outer(K[:5, 5], K[5, :5]) / K[5, 5]

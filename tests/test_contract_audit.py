@@ -399,3 +399,30 @@ def test_csv_time_column_not_first_says_so(tmp_path):
     path.write_text("# sample_rate_hz: 200000\n# excitation_direction: 0 -1 0\nforce,acc_A_y,time\n0,0,0\n1,1,0.000005\n")
     code, _, err = cli("identify", path)
     assert code == 2 and err.count("\n") == 1 and "'time' column must be its first column" in err
+
+
+def test_paper_case_compliant_lateral_support_independent_data(tmp_path):
+    """physics-notes: a lateral rail support of 1.2e8 N/m pulls the u-phi mode from 2496 to ~1075 Hz.
+
+    The independent writer condenses a massless rail on that spring into the roller springs:
+    roll_low = 1080.9 Hz, the other joint mode untouched. Identify must report it as f_H with
+    K_H = 4 pi^2 M f_H^2 (the paper's 1.00e8 N/m) and explain must name the support.
+    """
+    freqs, _ = gen.modes(k_support=1.2e8)
+    zetas = [0.105, 0.02, 0.02, 0.0288, 0.02]  # ascending: roll_low is now the lowest mode
+    spec = {}
+    for i, run in enumerate(("vertical", "lateral")):
+        chans, data = gen.run_hits(run, n_hits=2, n=6000, seed=i, k_support=1.2e8, zetas=zetas)
+        spec[run] = dict(chans=chans, data=data, fs=200_000.0, direction=gen.RUNS[run][1],
+                         position=gen.RUNS[run][0])
+    path = gen.write_file(tmp_path / "support.h5", spec)
+    p = identify(path, settings=FAST).parameters
+    assert freqs[0] == pytest.approx(1080.9, abs=0.1)
+    assert p["f_H"]["value"] == pytest.approx(freqs[0], rel=5e-4)
+    assert p["zeta_H"]["value"] == pytest.approx(0.105, rel=0.02)
+    assert p["K_H"]["value"] == pytest.approx(4 * np.pi ** 2 * gen.M * freqs[0] ** 2, rel=1e-3)
+    assert p["f_V"]["value"] == pytest.approx(F_V, rel=2e-4)
+    d = _explain_json(path)
+    assert d["verdict"] == "explained"
+    assert [(e["name"], e["variant"]) for e in d["effects"]] == [("support_compliance", "lateral")]
+    assert d["effects"][0]["parameters"]["lateral_n_per_m"]["value"] == pytest.approx(1.2e8, rel=0.01)
