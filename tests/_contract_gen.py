@@ -54,15 +54,20 @@ def sensor_row(position, direction):
     return _g(np.asarray(position, float), np.asarray(direction, float))
 
 
-def accel_frf(freqs_hz, rows_out, row_in, zetas, kn=KN, mass=M, k_support=None):
-    """Acceleration per force FRF (m/s^2/N), one column per output row."""
-    f, phi = modes(kn, mass, k_support)
+def accel_frf(freqs_hz, rows_out, row_in, zetas, kn=KN, mass=M, k_support=None, modal=None):
+    """Acceleration per force FRF (m/s^2/N), one column per output row.
+
+    ``modal`` = (frequencies, shapes) overrides the carriage's modes; shapes may have extra
+    DOFs after the carriage's five (a base body), which no sensor or hammer touches.
+    """
+    f, phi = modes(kn, mass, k_support) if modal is None else modal
+    pad = np.zeros(phi.shape[0] - 5)
     w = 2 * np.pi * np.asarray(freqs_hz)[:, None]
     out = np.zeros((len(freqs_hz), len(rows_out)), complex)
-    for r in range(5):
+    for r in range(len(f)):
         wr = 2 * np.pi * f[r]
-        a_in = row_in @ phi[:, r]
-        a_out = np.array([ro @ phi[:, r] for ro in rows_out])
+        a_in = np.append(row_in, pad) @ phi[:, r]
+        a_out = np.array([np.append(ro, pad) @ phi[:, r] for ro in rows_out])
         out += (-(w ** 2) * a_in * a_out[None, :]) / (wr ** 2 - w ** 2 + 2j * zetas[r] * wr * w)
     return out
 
@@ -74,15 +79,15 @@ def half_sine(n, fs, width_s, peak, start):
 
 
 def hit_record(n, fs, channels, hit_pos, hit_dir, peak=300.0, width_s=1e-4, pre=200, zetas=None,
-               noise=0.0, rng=None, kn=KN, mass=M, k_support=None):
+               noise=0.0, rng=None, kn=KN, mass=M, k_support=None, modal=None):
     """One hit: (n, n_channels) in SI (N, m/s^2); channels = list of (name, position, direction)."""
-    zetas = np.full(5, 0.02) if zetas is None else np.asarray(zetas)
+    zetas = np.full(5 if modal is None else len(modal[0]), 0.02) if zetas is None else np.asarray(zetas)
     npad = 4 * n
     force = half_sine(npad, fs, width_s, peak, pre / fs)
     F = np.fft.rfft(force)
     freqs = np.fft.rfftfreq(npad, 1 / fs)
     outs = [(i, sensor_row(p, d)) for i, (name, p, d) in enumerate(channels) if name.startswith("acc")]
-    H = accel_frf(freqs, [r for _, r in outs], sensor_row(hit_pos, hit_dir), zetas, kn, mass, k_support)
+    H = accel_frf(freqs, [r for _, r in outs], sensor_row(hit_pos, hit_dir), zetas, kn, mass, k_support, modal)
     rec = np.zeros((n, len(channels)))
     for i, (name, _, _) in enumerate(channels):
         if name == "force":
@@ -110,14 +115,14 @@ RUNS = {
 
 
 def run_hits(run="vertical", n_hits=4, n=8000, fs=200_000.0, seed=0, axes="xy", zetas=None, noise=0.002,
-             kn=KN, mass=M, peaks=None, channels=None, k_support=None):
+             kn=KN, mass=M, peaks=None, channels=None, k_support=None, modal=None):
     rng = np.random.default_rng(seed)
     pos, d = RUNS[run]
     chans = channels or default_channels(axes)
     chans = [(name, pos if name == "force" else p, d if name == "force" else dd) for name, p, dd in chans]
     peaks = peaks if peaks is not None else rng.uniform(200, 400, n_hits)
     data = np.stack([hit_record(n, fs, chans, pos, d, peak=pk, zetas=zetas, noise=noise, rng=rng, kn=kn,
-                                mass=mass, k_support=k_support) for pk in peaks])
+                                mass=mass, k_support=k_support, modal=modal) for pk in peaks])
     return chans, data
 
 
@@ -239,3 +244,20 @@ def stiffness_with_lateral_support(k_support, kn=KN):
             K += kn * np.outer(g, g)
     K[5, 5] += k_support
     return K[:5, :5] - np.outer(K[:5, 5], K[5, :5]) / K[5, 5]
+
+
+def modes_with_vertical_base(base_mass, k_base, kn=KN):
+    """6-DOF modes: the carriage on its rollers on a rail body of mass ``base_mass`` that moves
+    vertically on a spring ``k_base`` to ground (the rollers act on carriage minus rail motion)."""
+    h3 = H1 + H0
+    c, s = np.cos(BETA), np.sin(BETA)
+    rows = [((-E, -H1), (c, s)), ((E, -H1), (-c, s)), ((-E, -h3), (c, -s)), ((E, -h3), (-c, -s))]
+    K = np.zeros((6, 6))
+    for (x, y), (nx, ny) in rows:
+        for z in np.linspace(-LL / 2, LL / 2, ZL):
+            g = np.append(_g(np.array([x, y, z]), np.array([nx, ny, 0.0])), -ny)
+            K += kn * np.outer(g, g)
+    K[5, 5] += k_base
+    m = np.array([M, M, *J, base_mass])
+    w2, v = np.linalg.eigh(K / np.sqrt(np.outer(m, m)))
+    return np.sqrt(w2) / (2 * np.pi), v / np.sqrt(m)[:, None]

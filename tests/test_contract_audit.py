@@ -426,3 +426,27 @@ def test_paper_case_compliant_lateral_support_independent_data(tmp_path):
     assert d["verdict"] == "explained"
     assert [(e["name"], e["variant"]) for e in d["effects"]] == [("support_compliance", "lateral")]
     assert d["effects"][0]["parameters"]["lateral_n_per_m"]["value"] == pytest.approx(1.2e8, rel=0.01)
+
+
+def test_heavy_vertical_base_splits_the_vertical_mode_independent_data(tmp_path):
+    """physics-notes: a heavy base splits the vertical mode into an in-phase and an anti-phase pair
+    with identical shapes at A-D. 3 kg on 3e9 N/m: 2852.0 and 6227.6 Hz. f_V is the in-phase
+    (lower) one; explain must find base_mode with the body's mass and spring."""
+    modal = gen.modes_with_vertical_base(3.0, 3e9)
+    assert modal[0][3] == pytest.approx(2852.0, abs=0.1) and modal[0][5] == pytest.approx(6227.6, abs=0.1)
+    spec = {}
+    for i, run in enumerate(("vertical", "lateral")):
+        chans, data = gen.run_hits(run, n_hits=2, n=6000, seed=i, modal=modal)
+        spec[run] = dict(chans=chans, data=data, fs=200_000.0, direction=gen.RUNS[run][1],
+                         position=gen.RUNS[run][0])
+    path = gen.write_file(tmp_path / "base.h5", spec)
+    result = identify(path, settings=FAST)
+    assert result.parameters["f_V"]["value"] == pytest.approx(modal[0][3], rel=2e-4)
+    assert result.parameters["f_H"]["value"] == pytest.approx(F_H, rel=2e-4)
+    assert [m.frequency_hz for m in result.extra_modes] == [pytest.approx(modal[0][5], rel=2e-4)]
+    d = _explain_json(path)
+    assert d["verdict"] == "explained"
+    assert [(e["name"], e["variant"]) for e in d["effects"]] == [("base_mode", "vertical")]
+    params = d["effects"][0]["parameters"]
+    assert params["mass_kg"]["value"] == pytest.approx(3.0, rel=0.02)
+    assert params["vertical_n_per_m"]["value"] == pytest.approx(3e9, rel=0.02)
