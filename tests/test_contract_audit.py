@@ -453,3 +453,31 @@ def test_heavy_vertical_base_splits_the_vertical_mode_independent_data(tmp_path)
     params = d["effects"][0]["parameters"]
     assert params["mass_kg"]["value"] == pytest.approx(3.0, rel=0.02)
     assert params["vertical_n_per_m"]["value"] == pytest.approx(3e9, rel=0.02)
+
+
+@pytest.mark.parametrize("toml, message", [
+    ('[parameters]\nK_v = { min = 1e9 }\n', "unknown parameter 'parameters.K_v'"),
+    ('[parameters]\nK_V = { min = nan }\n', "must be a finite number"),
+    ('[parameters]\nf_H = { max = inf }\n', "must be a finite number"),
+    ('[quality]\nmin_coherence = 1.5\n', "from 0 to 1"),
+    ('[quality]\nmax_rejected_hits = 2.5\n', "an integer >= 0"),
+    ('[quality]\nmax_relative_std = -0.1\n', ">= 0"),
+])
+def test_invalid_check_spec_is_bad_input(tmp_path, toml, message):
+    """Was: a typo'd name failed every file ("K_v not identified", exit 1); NaN limits passed anything."""
+    from guidefit.check import CheckSpecError, parse_spec
+
+    spec = tmp_path / "spec.toml"
+    spec.write_text(toml)
+    import tomllib
+
+    with pytest.raises(CheckSpecError, match=message.replace("(", r"\(").replace(")", r"\)")):
+        parse_spec(tomllib.loads(toml), str(spec))
+
+
+def test_check_spec_nan_limit_refused_on_the_command_line(tmp_path):
+    path = gen.write_file(tmp_path / "rec.h5", _two_runs(n_hits=1))
+    spec = tmp_path / "spec.toml"
+    spec.write_text("[parameters]\nK_V = { min = nan }\n")
+    code, _, err = cli("identify", path, "--check", spec, "--no-jackknife")
+    assert code == 2 and err.count("\n") == 1 and "finite number" in err
