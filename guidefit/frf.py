@@ -428,6 +428,7 @@ def _pulse_extent(force: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     n = force.shape[1]
     starts, ends = [], []
     for f in force:
+        f = f - _force_offset(f, f)  # an offset (sensor bias) is not part of the pulse
         hi, lo = int(np.argmax(f)), int(np.argmin(f))
         p, sign = (hi, 1.0) if f[hi] >= -f[lo] else (lo, -1.0)
         below = sign * f <= PULSE_THRESHOLD * sign * f[p]
@@ -684,8 +685,22 @@ class _Accumulator:
         }
 
 
+FORCE_OFFSET_FRACTION = 0.002  # a force median beyond 0.2 % of the peak there is a sensor bias, removed
+
+
+def _force_offset(quiet_force: np.ndarray, pulse_force: np.ndarray) -> float:
+    """The force offset: the median of ``quiet_force`` (samples where the hammer pushes nothing)
+    if beyond 0.2 % of the peak of ``pulse_force``, else 0.
+
+    Smaller offsets are noise-level (and AC-coupled amplifiers drift that much after a hit), left as
+    they are; a larger one is a bias whose windowed rectangle would add to the force spectrum.
+    """
+    base = float(np.median(quiet_force))
+    return base if abs(base) > FORCE_OFFSET_FRACTION * max(float(pulse_force.max()), -float(pulse_force.min())) else 0.0
+
+
 def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windows,
-                n_groups: int, workers: int) -> _Accumulator | None:
+                n_groups: int, workers: int, force_offset: bool = False) -> _Accumulator | None:
     """Window, FFT and accumulate all records, a few hits per FFT call.
 
     ``windows(block)`` gets the first block of raw records as (n, C, n_samples)
@@ -694,7 +709,8 @@ def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windo
     contiguous rows are faster than along axis 0 of (n_samples, C) records).
     The spectral products of one block run on a helper thread while the main
     thread windows and transforms the next one (scipy's FFT and numpy's ufuncs
-    release the GIL). Returns ``None`` when there is no record.
+    release the GIL). Returns ``None`` when there is no record. ``force_offset``:
+    remove each record's force offset (its median where the force window is 0).
     """
     from concurrent.futures import ThreadPoolExecutor
 
@@ -709,7 +725,7 @@ def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windo
     acc = _Accumulator(n, c, fi, n_groups, workers)
     block = _block_size(n, c)
     buf = np.empty((block, c, n))
-    window_t = None
+    window_t = quiet = None
     with ThreadPoolExecutor(max_workers=1) if workers > 1 else _NullExecutor() as pool:
         future = None
         while True:
@@ -723,6 +739,8 @@ def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windo
                     np.copyto(buf[k], item[1].T)
                 else:
                     np.multiply(item[1].T, window_t, out=buf[k])
+                    if quiet is not None:  # force offset (sensor bias): out of the windowed force
+                        buf[k, fi] -= _force_offset(item[1][quiet, fi], buf[k, fi]) * window_t[fi]
                 item = None
                 k += 1
             if k == 0:
@@ -732,6 +750,12 @@ def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windo
                 window_t = np.empty((c, n))
                 window_t[:] = np.asarray(w_resp, dtype=float)
                 window_t[fi] = np.asarray(w_force, dtype=float)
+                # a hammer pushes nothing after the force window: the force there is the sensor's offset
+                quiet = np.flatnonzero(window_t[fi] == 0.0)[-512:] if force_offset else np.empty(0)
+                quiet = quiet if quiet.size >= 16 else None  # the last <= 512 quiet samples: plenty, cheap
+                if quiet is not None:
+                    for j in range(k):
+                        buf[j, fi] -= _force_offset(buf[j, fi, quiet], buf[j, fi])
                 buf[:k] *= window_t
             Z = scipy.fft.rfft(buf[:k], axis=-1, workers=workers)
             if future is not None:
@@ -1196,7 +1220,7 @@ def _frf(items, sample_rate_hz, force_index, channel_names, estimator, window,
         return choice.arrays(block.shape[-1], fs)
 
     items = _checked_force(_validated(items, run, n_channels), fi, run)
-    acc = _run_blocks(items, fi, windows, n_groups, max(1, int(workers)))
+    acc = _run_blocks(items, fi, windows, n_groups, max(1, int(workers)), force_offset=True)
     if acc is None:
         reasons = ", ".join(f"{r} x{k}" for r, k in sorted(rejected.items()))
         detail = f" ({sum(rejected.values())} rejected: {reasons})" if rejected else ""
