@@ -608,7 +608,7 @@ def _select(all_modes: list[IdentifiedMode], model, warnings: list, run_axes: di
             unique_extras.append(m)
     for m in unique_extras:
         warnings.append(f"run '{m.run}': a mode at {m.frequency_hz:.1f} Hz that the model does not predict "
-                        f"(no carriage mode of the model left to pair it with)")
+                        f"(not paired with any carriage mode of the model)")
     missing = [lab for lab in model.labels if lab not in chosen and not lab.startswith("support")]
     for lab in missing:
         warnings.append(f"model mode '{lab}' ({model.frequency_hz(lab):.0f} Hz) not observed in any run")
