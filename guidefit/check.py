@@ -13,7 +13,10 @@ A check spec is a TOML file::
     max_relative_std = 0.02           # std / value of every checked parameter
     allow_warnings = true             # false: any warning is a violation
 
-A parameter that was not identified (``null``) violates any band on it.
+A parameter that was not identified (``null``) violates any band on it. A band
+on a name that is not one of identify's eight parameters, a limit that is not a
+finite number, or a quality limit out of its range (coherence 0-1, counts whole
+and >= 0) makes the spec invalid (exit 2) rather than fail every file.
 :func:`junit_xml` writes the outcome per file as JUnit XML for CI systems.
 
 Examples
@@ -25,11 +28,13 @@ Examples
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 from guidefit.errors import GuideError
 
 _QUALITY = {"min_coherence": float, "max_rejected_hits": int, "max_relative_std": float, "allow_warnings": bool}
+_PARAMETERS = ("f_V", "zeta_V", "K_V", "c_V", "f_H", "zeta_H", "K_H", "c_H")  # identify's parameters
 _JOINT = ("vertical", "roll_low")
 
 
@@ -66,12 +71,15 @@ def parse_spec(data: dict, where: str) -> CheckSpec:
         raise CheckSpecError(f"{where}: unknown section '{sorted(unknown)[0]}'; allowed: parameters, quality")
     bands = {}
     for name, band in data.get("parameters", {}).items():
+        if name not in _PARAMETERS:  # a typo would otherwise fail every file as "not identified"
+            raise CheckSpecError(f"{where}: unknown parameter 'parameters.{name}'; allowed: {', '.join(_PARAMETERS)}")
         if not isinstance(band, dict) or not band or set(band) - {"min", "max"}:
             raise CheckSpecError(f"{where}: parameters.{name} must be a table with 'min' and/or 'max'")
         lo, hi = band.get("min"), band.get("max")
         for key, value in (("min", lo), ("max", hi)):
-            if value is not None and (isinstance(value, bool) or not isinstance(value, int | float)):
-                raise CheckSpecError(f"{where}: parameters.{name}.{key} must be a number, got {value!r}")
+            if value is not None and (isinstance(value, bool) or not isinstance(value, int | float)
+                                      or not math.isfinite(value)):
+                raise CheckSpecError(f"{where}: parameters.{name}.{key} must be a finite number, got {value!r}")
         if lo is not None and hi is not None and lo > hi:
             raise CheckSpecError(f"{where}: parameters.{name}: min {lo} is above max {hi}")
         bands[name] = (lo, hi)
@@ -82,8 +90,14 @@ def parse_spec(data: dict, where: str) -> CheckSpec:
         kind = _QUALITY[name]
         ok = isinstance(value, bool) if kind is bool else (isinstance(value, int | float)
                                                            and not isinstance(value, bool))
+        if ok and kind is int:
+            ok = float(value).is_integer() and value >= 0
+        elif ok and kind is float:
+            ok = math.isfinite(value) and value >= 0 and (name != "min_coherence" or value <= 1)
         if not ok:
-            raise CheckSpecError(f"{where}: quality.{name} must be {kind.__name__}, got {value!r}")
+            expected = {"min_coherence": "a number from 0 to 1", "max_rejected_hits": "an integer >= 0",
+                        "max_relative_std": "a finite number >= 0", "allow_warnings": "true or false"}[name]
+            raise CheckSpecError(f"{where}: quality.{name} must be {expected}, got {value!r}")
         quality[name] = value
     return CheckSpec(bands, quality)
 

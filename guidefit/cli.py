@@ -16,9 +16,33 @@ import click
 
 from guidefit import __version__
 
+_NO_ARGS_IS_HELP = getattr(click.exceptions, "NoArgsIsHelpError", ())
+
 
 class _Group(click.Group):
     """A click group that turns guidefit errors into one-line messages and exit codes."""
+
+    def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
+        """Usage errors (bad option, missing argument, unknown command) as one line, exit 2."""
+        if not standalone_mode:
+            return super().main(args, prog_name, complete_var, standalone_mode, **extra)
+        try:
+            code = super().main(args, prog_name, complete_var, False, **extra)
+        except _NO_ARGS_IS_HELP as exc:  # bare `guidefit`: the help text, as click shows it
+            exc.show()
+            sys.exit(exc.exit_code)
+        except click.UsageError as exc:
+            where = f" (see '{exc.ctx.command_path} --help')" if exc.ctx is not None else ""
+            message = " ".join(exc.format_message().split())
+            click.echo(f"guidefit: error: {message}{where}", err=True)
+            sys.exit(exc.exit_code)
+        except click.ClickException as exc:
+            click.echo(f"guidefit: error: {' '.join(exc.format_message().split())}", err=True)
+            sys.exit(exc.exit_code)
+        except click.exceptions.Abort:
+            click.echo("guidefit: aborted", err=True)
+            sys.exit(1)
+        sys.exit(code if isinstance(code, int) else 0)
 
     def invoke(self, ctx):
         from guidefit.errors import GuidefitError
@@ -29,7 +53,8 @@ class _Group(click.Group):
             click.echo(f"guidefit: error: {exc}", err=True)
             sys.exit(exc.exit_code)
         except OSError as exc:
-            click.echo(f"guidefit: error: {exc.filename or ''}: {exc.strerror or exc}", err=True)
+            where = f"{exc.filename}: " if exc.filename else ""
+            click.echo(f"guidefit: error: {where}{exc.strerror or exc}", err=True)
             sys.exit(2)
         except KeyboardInterrupt:
             click.echo("guidefit: interrupted", err=True)
@@ -115,13 +140,24 @@ def predict(guide_name, load_text, sweep, calibration, as_json, plot_path):
     report.render_prediction(result, as_json=as_json, plot_path=plot_path)
 
 
+def _named_guide_error(path, exc):
+    """A guide error caused by the guide a file names (no --guide given): say which file."""
+    from guidefit.errors import GuideError
+
+    return GuideError(f"{path}: the guide the file names: {exc}; choose one with --guide NAME or a guide TOML")
+
+
 def _identify_one(path, guide, settings):
     """Worker for one file: (exit code, Identification or None, error text)."""
-    from guidefit.errors import GuidefitError
+    from guidefit.errors import GuideError, GuidefitError
     from guidefit.identify import identify
 
     try:
         return 0, identify(path, guide=guide, settings=settings), None
+    except GuideError as exc:
+        if guide is None:
+            exc = _named_guide_error(path, exc)
+        return exc.exit_code, None, str(exc)
     except GuidefitError as exc:
         return exc.exit_code, None, str(exc)
     except Exception as exc:  # noqa: BLE001 - a batch goes on; the file is reported
@@ -129,7 +165,7 @@ def _identify_one(path, guide, settings):
 
 
 @main.command(name="identify")
-@click.argument("files", nargs=-1, required=True, type=click.Path(dir_okay=False))
+@click.argument("files", nargs=-1, required=True, type=click.Path())
 @click.option("--guide", "guide_name", help="Guide name or TOML (default: the file's guide attribute, else MRB35).")
 @click.option("--estimator", type=click.Choice(["H1", "H2", "Hv"]), default="H1", show_default=True)
 @click.option("--json", "as_json", is_flag=True, help="One JSON object per file (JSON Lines) on stdout.")
@@ -165,8 +201,7 @@ def identify_cmd(files, guide_name, estimator, as_json, csv_path, summary_path, 
         violations = []
         if result is None:
             click.echo(f"guidefit: error: {error}", err=True)
-            data = {"file": str(path), "error": error, "exit_code": code, "parameters": {}, "modes": [],
-                    "warnings": [error]}
+            data = _failed_json(path, guide_name, code, error)
             rows.append({"file": str(path), "error": error})
         else:
             data = result.to_dict()
@@ -199,6 +234,22 @@ def identify_cmd(files, guide_name, estimator, as_json, csv_path, summary_path, 
     if len(files) > 1 and not as_json:
         report.render_batch_summary(rows, outcomes, console)
     sys.exit(worst)
+
+
+def _failed_json(path, guide_name, code, error) -> dict:
+    """The JSON object of a file without a result: the contract's fields, every value null."""
+    from guidefit.identify import joint_parameters
+
+    guide = guide_name
+    if guide is None:
+        try:  # the file's own guide when its metadata can be read (e.g. every hit rejected)
+            from guidefit.recording import read_recording
+
+            guide = read_recording(path).guide or "MRB35"
+        except Exception:  # noqa: BLE001 - unreadable file: the guide is unknown
+            guide = None
+    return {"file": str(path), "guide": guide, "parameters": joint_parameters(1.0, {}), "modes": [],
+            "warnings": [error], "error": error, "exit_code": code}
 
 
 def _map_files(files, guide_name, settings, jobs, console):
@@ -305,8 +356,15 @@ def explain_cmd(recording, modes_path, guide_name, candidates, as_json, plot_pat
             raise click.BadParameter(f"unknown effect '{unknown[0]}'; have {', '.join(EFFECTS)}",
                                      param_hint="--candidates")
     source = modes_path or recording
+    from guidefit.errors import GuideError
+
     with report.spinner("explaining", enabled=not as_json) as progress:
-        result = explain(source, guide=guide_name, candidates=names, progress=progress)
+        try:
+            result = explain(source, guide=guide_name, candidates=names, progress=progress)
+        except GuideError as exc:
+            if guide_name is not None:
+                raise
+            raise _named_guide_error(source, exc) from None
     if plot_path:
         report.plot_explanation_with_frf(result, plot_path, recording)
     if as_json:

@@ -432,6 +432,7 @@ def _pulse_extent(force: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     n = force.shape[1]
     starts, ends = [], []
     for f in force:
+        f = f - _force_offset(f, f)  # an offset (sensor bias) is not part of the pulse
         hi, lo = int(np.argmax(f)), int(np.argmin(f))
         p, sign = (hi, 1.0) if f[hi] >= -f[lo] else (lo, -1.0)
         below = sign * f <= PULSE_THRESHOLD * sign * f[p]
@@ -688,8 +689,22 @@ class _Accumulator:
         }
 
 
+FORCE_OFFSET_FRACTION = 0.002  # a force median beyond 0.2 % of the peak there is a sensor bias, removed
+
+
+def _force_offset(quiet_force: np.ndarray, pulse_force: np.ndarray) -> float:
+    """The force offset: the median of ``quiet_force`` (samples where the hammer pushes nothing)
+    if beyond 0.2 % of the peak of ``pulse_force``, else 0.
+
+    Smaller offsets are noise-level (and AC-coupled amplifiers drift that much after a hit), left as
+    they are; a larger one is a bias whose windowed rectangle would add to the force spectrum.
+    """
+    base = float(np.median(quiet_force))
+    return base if abs(base) > FORCE_OFFSET_FRACTION * max(float(pulse_force.max()), -float(pulse_force.min())) else 0.0
+
+
 def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windows,
-                n_groups: int, workers: int) -> _Accumulator | None:
+                n_groups: int, workers: int, force_offset: bool = False) -> _Accumulator | None:
     """Window, FFT and accumulate all records, a few hits per FFT call.
 
     ``windows(first)`` gets the first (up to ``_WINDOW_HITS``) raw records as
@@ -706,7 +721,9 @@ def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windo
     this overlaps the reading and checking). With ``workers=1`` everything
     runs on the calling thread. The sums are added block after block in hit
     order, so the result does not depend on the number of threads or their
-    timing. Returns ``None`` when there is no record.
+    timing. Returns ``None`` when there is no record. ``force_offset``:
+    remove each record's force offset (its median where the force window is
+    0, see :func:`_force_offset`).
     """
     import threading
     from concurrent.futures import ThreadPoolExecutor
@@ -738,6 +755,12 @@ def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windo
     window_t = np.empty((c, n))
     window_t[:] = np.asarray(w_resp, dtype=float)
     window_t[fi] = np.asarray(w_force, dtype=float)
+    # a hammer pushes nothing after the force window: the force there is the sensor's offset
+    quiet = np.flatnonzero(window_t[fi] == 0.0)[-512:] if force_offset else np.empty(0)
+    quiet = quiet if quiet.size >= 16 else None  # the last <= 512 quiet samples: plenty, cheap
+    if quiet is not None:
+        for j in range(k):
+            first[j, fi] -= _force_offset(first[j, fi, quiet], first[j, fi])
     first *= window_t
     if space.shape[0] > n_bufs * block:  # the first records did not fit in the buffers
         space = np.empty((n_bufs * block, c, n))
@@ -766,6 +789,8 @@ def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windo
         if k < block:
             for _, record in source:
                 np.multiply(record.T, window_t, out=buf[k])
+                if quiet is not None:  # force offset (sensor bias): out of the windowed force
+                    buf[k, fi] -= _force_offset(record[quiet, fi], buf[k, fi]) * window_t[fi]
                 del record
                 k += 1
                 if k == block:
@@ -1286,7 +1311,7 @@ def _frf(items, sample_rate_hz, force_index, channel_names, estimator, window,
         return choice.arrays(block.shape[-1], fs)
 
     items = _checked_force(_validated(items, run, n_channels), fi, run)
-    acc = _run_blocks(items, fi, windows, n_groups, max(1, int(workers)))
+    acc = _run_blocks(items, fi, windows, n_groups, max(1, int(workers)), force_offset=True)
     if acc is None:
         reasons = ", ".join(f"{r} x{k}" for r, k in sorted(rejected.items()))
         detail = f" ({sum(rejected.values())} rejected: {reasons})" if rejected else ""

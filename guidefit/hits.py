@@ -468,6 +468,9 @@ def _check_raw(
     return _hit_with_rows(run.name, index, rows, peak, trigger, metrics)
 
 
+_ABSURD_SAMPLE = 1e100  # |sample| at or beyond this is corrupt (non_finite); its square overflows
+
+
 def _assess(data, run: Run, s: HitSettings, pre: int | None, median_peak, force_base=None):
     """(codes, reasons, signed peak, pretrigger, metrics) of one record ``data`` (n, C).
 
@@ -487,15 +490,17 @@ def _assess_rows(columns, run: Run, s: HitSettings, pre: int | None, median_peak
     metrics = dict.fromkeys(_METRICS, math.nan)
     # max and min of each channel: NaN if it holds a NaN, +-Inf if an Inf
     tops, bottoms = columns.max(axis=1), columns.min(axis=1)
-    if not (np.isfinite(tops).all() and np.isfinite(bottoms).all()):
-        finite = np.isfinite(columns)
+    # a sample beyond +-1e100 (a corrupt one: no force or acceleration comes near) would overflow the spectra
+    if not (np.all(np.abs(tops) < _ABSURD_SAMPLE) and np.all(np.abs(bottoms) < _ABSURD_SAMPLE)):
+        finite = np.abs(columns) < _ABSURD_SAMPLE  # False for NaN too
         bad = [names[c] for c in np.flatnonzero(~finite.all(axis=1))]
         force = columns[fi][finite[fi]]
         peak = _signed_extreme(force - np.median(force)) if force.size else math.nan
         count = int((~finite).sum())
         return (
             ["non_finite"],
-            [f"non_finite: {count} NaN/Inf sample(s) in {', '.join(bad)}"],
+            [f"non_finite: {count} NaN/Inf{'' if count == (~np.isfinite(columns)).sum() else ' or corrupt (beyond 1e100)'} "
+             f"sample(s) in {', '.join(bad)}"],
             peak,
             pre,
             metrics,
@@ -966,12 +971,12 @@ def _rows_buffer(spare: list, shape: tuple[int, int]) -> np.ndarray:
 
 
 def _force_stats(run: Run, chunk: int, reader) -> tuple[float, float, float]:
-    """(mean, max, min) of the finite force samples, streamed."""
+    """(mean, max, min) of the finite force samples (not corrupt ones, beyond 1e100), streamed."""
     total, count = 0.0, 0
     hi, lo = -math.inf, math.inf
     for start in range(0, run.n_samples, chunk):
         f = reader.read_block(start, min(run.n_samples, start + chunk), [run.force_index])[:, 0]
-        f = f[np.isfinite(f)]
+        f = f[np.abs(f) < _ABSURD_SAMPLE]
         if f.size:
             total += float(np.sum(f))
             count += f.size

@@ -165,6 +165,11 @@ class Identification:
     warnings: tuple
     extra_modes: tuple = ()
     missing_modes: tuple = ()
+    failed_run_hits: tuple = ()  # hit rows of runs that gave no FRF (every hit rejected)
+
+    def hit_rows(self) -> list[dict]:
+        """Every hit of every run, accepted or rejected, including runs that gave no FRF."""
+        return [row for run in self.runs for row in run.hits] + list(self.failed_run_hits)
 
     def to_dict(self) -> dict:
         """The contract's JSON object (``identify --json``), with optional extra fields."""
@@ -176,7 +181,7 @@ class Identification:
             "warnings": list(self.warnings),
             "extra_modes": [m.to_dict() for m in self.extra_modes],
             "missing_modes": list(self.missing_modes),
-            "hits": [row for run in self.runs for row in run.hits],
+            "hits": self.hit_rows(),
             "sensors": [
                 {"name": ch.name, "position_m": [float(x) for x in ch.position_m],
                  "direction": [float(x) for x in ch.direction]}
@@ -514,6 +519,9 @@ def _with_jackknife(modes: list, frf_by_run: dict) -> list:
     return out
 
 
+MIN_BINS_IN_BAND = 8  # fewer FRF bins than this in the search band: no mode fit is attempted
+
+
 def _fit_run(run, frf, guide, model, settings, warnings: list) -> list[IdentifiedMode]:
     from guidefit import frf as frf_mod
     from guidefit import modes as modes_mod
@@ -523,6 +531,13 @@ def _fit_run(run, frf, guide, model, settings, warnings: list) -> list[Identifie
     if not band[1] > band[0] * 1.05:
         warnings.append(f"run '{run.name}': sample rate {run.sample_rate_hz:g} Hz too low for the modes "
                         f"searched from {band[0]:.0f} Hz (needs at least {band[0] / 0.4:.0f} Hz)")
+        return []
+    freq = np.asarray(frf.frequency_hz)
+    if np.count_nonzero((freq >= band[0]) & (freq <= band[1])) < MIN_BINS_IN_BAND:
+        n = 2 * (len(freq) - 1)
+        warnings.append(f"run '{run.name}': records of about {n} samples give {freq[-1] / max(len(freq) - 1, 1):.0f} Hz "
+                        f"resolution, too coarse for the modes between {band[0]:.0f} and {band[1]:.0f} Hz "
+                        f"(fewer than {MIN_BINS_IN_BAND} bins); longer records are needed")
         return []
     try:
         import warnings as _w
@@ -719,7 +734,7 @@ def _select(all_modes: list[IdentifiedMode], model, warnings: list, run_axes: di
             unique_extras.append(m)
     for m in unique_extras:
         warnings.append(f"run '{m.run}': a mode at {m.frequency_hz:.1f} Hz that the model does not predict "
-                        f"(shape not matching any carriage mode)")
+                        f"(not paired with any carriage mode of the model)")
     missing = [lab for lab in model.labels if lab not in chosen and not lab.startswith("support")]
     for lab in missing:
         warnings.append(f"model mode '{lab}' ({model.frequency_hz(lab):.0f} Hz) not observed in any run")
@@ -742,8 +757,31 @@ def _quality_warnings(modes, settings, warnings: list) -> None:
                             f"the curve-fit damping is the one to trust")
 
 
-def run_frfs(recording, settings: IdentifySettings, warnings: list):
+MAX_FORCE_DROP_DB = 20.0  # hammer practice: use the band where the force spectrum is within 20 dB of its peak
+
+
+def _excitation_warnings(modes, frf_by_run: dict, warnings: list) -> None:
+    """Warn when a joint mode lies where the hammer barely excites (e.g. a soft tip's spectral notch)."""
+    for m in modes:
+        frf = frf_by_run.get(m.run)
+        sff = (getattr(frf, "group_sums", None) or {}).get("Sff")
+        if m.label not in JOINT_LABELS.values() or sff is None:
+            continue
+        sff = np.sum(np.asarray(sff, dtype=float), axis=0)
+        freq = np.asarray(frf.frequency_hz)
+        peak = float(np.max(sff[freq > 0], initial=0.0))
+        here = float(sff[int(np.argmin(np.abs(freq - m.frequency_hz)))])
+        if peak > 0 and here < peak * 10 ** (-MAX_FORCE_DROP_DB / 10):
+            drop = "no" if here <= 0 else f"{-10 * np.log10(here / peak):.0f} dB less"
+            warnings.append(f"mode {m.label} at {m.frequency_hz:.1f} Hz: the hammer puts {drop} force there than at "
+                            f"its spectral peak (limit {MAX_FORCE_DROP_DB:.0f} dB; a harder tip helps); the frequency "
+                            "and damping may be off by more than their std")
+
+
+def run_frfs(recording, settings: IdentifySettings, warnings: list, failed: list | None = None):
     """Yield (run, FrfSet, hit rows) for every run that gives an FRF; problems go to ``warnings``.
+
+    The hit rows of a run that gives no FRF are added to ``failed`` (when given).
 
     Hits stream from the file into the spectral sums (bounded memory); each
     rejected hit is listed with its reason.
@@ -752,6 +790,11 @@ def run_frfs(recording, settings: IdentifySettings, warnings: list):
     from guidefit.hits import HitSettings, iter_hits
 
     for run in recording.runs:
+        if not run.response_indices:
+            from guidefit.errors import RecordingError
+
+            raise RecordingError(f"{run.file}: run '{run.name}': no acceleration channel; an FRF needs "
+                                 "'force' and at least one 'acc_<point>_<axis>'")
         rows: list[dict] = []
 
         def tapped(it, rows=rows, run=run):
@@ -765,7 +808,10 @@ def run_frfs(recording, settings: IdentifySettings, warnings: list):
         try:
             frf = compute_frf(run, hits, estimator=settings.estimator, window=settings.window or WindowSettings())
         except IdentificationError as exc:
-            warnings.append(f"run '{run.name}': {exc}")
+            text = str(exc)
+            warnings.append(text if text.startswith(f"run '{run.name}'") else f"run '{run.name}': {text}")
+            if failed is not None:
+                failed.extend(rows)
             continue
         n_ok = sum(r["accepted"] for r in rows)
         if n_ok < settings.min_accepted_hits:
@@ -803,7 +849,8 @@ def identify(path, guide=None, settings: IdentifySettings | None = None) -> Iden
     warnings: list[str] = []
     runs = []
     all_modes: list[IdentifiedMode] = []
-    for run, frf, rows in run_frfs(recording, settings, warnings):
+    failed_rows: list[dict] = []
+    for run, frf, rows in run_frfs(recording, settings, warnings, failed_rows):
         modes = _fit_run(run, frf, guide, model, settings, warnings)
         all_modes.extend(modes)
         levels = _force_levels(run, frf, rows, modes, settings, warnings) if settings.force_levels else []
@@ -817,11 +864,14 @@ def identify(path, guide=None, settings: IdentifySettings | None = None) -> Iden
         modes = _with_jackknife(modes, {r.name: r.frf for r in runs})
     joint = {k: next((m for m in modes if m.label == lab), None) for k, lab in JOINT_LABELS.items()}
     if joint["V"] is None and joint["H"] is None:
-        raise IdentificationError(f"{path}: neither the vertical nor the horizontal joint mode was found")
+        why = [w for w in warnings if " hit " not in w.split(":", 1)[0]]  # run-level reasons, not each hit
+        raise IdentificationError(f"{path}: neither the vertical nor the horizontal joint mode was found"
+                                  + (f" ({'; '.join(why)})" if why else ""))
     _quality_warnings(modes, settings, warnings)
+    _excitation_warnings(modes, {r.name: r.frf for r in runs}, warnings)
     params = joint_parameters(guide.mass_kg, joint)
     return Identification(str(path), guide, tuple(runs), tuple(modes), params, tuple(warnings),
-                          tuple(extras), tuple(missing))
+                          tuple(extras), tuple(missing), tuple(failed_rows))
 
 
 

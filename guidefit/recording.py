@@ -659,6 +659,8 @@ def _build_channels(where, names, units, positions, directions) -> tuple[tuple[C
         hint = ""
         if name.lower() == "force" or re.match(r"^acc_[a-z0-9]+_[xyz]$", name, re.IGNORECASE):
             hint = " (names are case-sensitive)"
+        elif name == "time":
+            hint = " (a CSV's 'time' column must be its first column)"
         raise RecordingError(
             f"{where}: channel '{name}' not recognised; expected 'force' or 'acc_<point>_<axis>' "
             f"with axis x, y or z, e.g. 'acc_A_y'{hint}"
@@ -1074,7 +1076,9 @@ def _check_version(value, where: str) -> None:
 
 
 def _optional_text(attrs, name: str, where: str) -> str:
-    if name not in attrs:
+    import h5py
+
+    if name not in attrs or isinstance(attrs[name], h5py.Empty):  # absent, or present without a value
         return ""
     text = _strings(attrs[name], where, name)
     if text is None or len(text) != 1:
@@ -1626,7 +1630,12 @@ def _read_csv(p: Path, display: str) -> Recording:
             key, value = body.split(":", 1)
             key = key.strip().lower()
             if key in _CSV_KEYS:
-                meta[key] = (value.strip(), i + 1)
+                if key in meta and meta[key][0] != value.strip():
+                    raise RecordingError(
+                        f"{display}: line {i + 1} '{key}': given again as '{_clip(value.strip())}' (line {meta[key][1]}: "
+                        f"'{_clip(meta[key][0])}'); expected each key once"
+                    )
+                meta.setdefault(key, (value.strip(), i + 1))
         i += 1
     if i >= len(lines):
         raise RecordingError(

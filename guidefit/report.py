@@ -230,8 +230,9 @@ def render_identification(result, console=None) -> None:
             "-" if hp is None else f"{hp['zeta_window_corrected']:.4f} ({hp['bins_in_band']})",
         )
     console.print(modes)
-    rejected = [h for run in result.runs for h in run.hits if not h["accepted"]]
-    n_hits = sum(len(run.hits) for run in result.runs)
+    all_hits = result.hit_rows()
+    rejected = [h for h in all_hits if not h["accepted"]]
+    n_hits = len(all_hits)
     console.print(f"hits: {n_hits - len(rejected)} accepted, {len(rejected)} rejected")
     if rejected:
         hits = Table(title="rejected hits")
@@ -289,16 +290,22 @@ class file_progress:
     def __init__(self, total: int, console=None):
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
+        console = console or _console(stderr=True)
+        self._progress = None
+        if not console.is_terminal:  # a pipe or a log: no bar, and no blank line left behind
+            return
         self._progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
-                                  TimeRemainingColumn(), console=console or _console(stderr=True), transient=True)
+                                  TimeRemainingColumn(), console=console, transient=True)
         self._task = self._progress.add_task("files", total=total)
         self._progress.start()
 
     def advance(self, n: int = 1) -> None:
-        self._progress.advance(self._task, n)
+        if self._progress is not None:
+            self._progress.advance(self._task, n)
 
     def close(self) -> None:
-        self._progress.stop()
+        if self._progress is not None:
+            self._progress.stop()
 
 
 def render_batch_summary(rows: list[dict], outcomes: list, console=None) -> None:
@@ -351,8 +358,11 @@ class spinner:
             return None
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
+        console = _console(stderr=True)
+        if not console.is_terminal:  # a pipe or a log: no bar, and no blank line left on stderr
+            return None
         self._progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
-                                  console=_console(stderr=True), transient=True)
+                                  console=console, transient=True)
         self._task = self._progress.add_task(self._title, total=None)
         self._progress.start()
         return self
