@@ -70,7 +70,7 @@ def render_html(identification, explanation=None, explain_error: str | None = No
                           f"{m.damping_ratio:.4f}", fmt(m.model_frequency_hz, "Hz"), f"{m.coherence:.3f}",
                           "-" if hp is None else f"{hp['zeta_window_corrected']:.4f}"])
     parts.append(_table(["label", "run", "f_n", "std", "zeta", "model", "coherence", "half-power zeta"], mode_rows))
-    hits = [h for run in result.runs for h in run.hits]
+    hits = result.hit_rows()  # runs that gave no FRF included
     parts.append(f"<h2>Hits</h2><p>{sum(h['accepted'] for h in hits)} accepted, "
                  f"{sum(not h['accepted'] for h in hits)} rejected</p>")
     parts.append(_table(["run", "hit", "peak force (N)", "accepted", "reason"],

@@ -502,3 +502,12 @@ def test_force_sensor_offset_does_not_bias_the_frf(tmp_path, offset_n):
         assert np.median(np.abs(fb.H[band] / fa.H[band] - 1)) < 0.002
     result = identify(biased, settings=FAST)
     assert result.parameters["f_V"]["value"] == pytest.approx(F_V, rel=5e-5)
+
+
+def test_html_report_lists_the_hits_of_a_run_without_frf(tmp_path):
+    """Was: the HTML report counted hits from the runs with FRFs only (same gap as the table)."""
+    path = _all_hits_rejected_in_vertical(tmp_path)
+    out = tmp_path / "report.html"
+    code, _, err = cli("report", path, "-o", str(out))
+    assert code == 0, err
+    assert "3 accepted, 3 rejected" in out.read_text()
