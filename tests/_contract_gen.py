@@ -228,36 +228,32 @@ def write_csv(path, chans, data, fs, direction, meta=None, time_col=True, units=
     return path
 
 
-def stiffness_with_lateral_support(k_support, kn=KN):
-    """5x5 carriage stiffness with the rail on a lateral spring to ground (massless rail, condensed).
-
-    The rail moves as a rigid body along x only (r); each roller spring acts on the normal
-    component of carriage motion minus rail motion: g_c . q - n_x r.
-    """
+def _stiffness_with_rail(k_rail, rail_axis, kn=KN):
+    """6x6 stiffness of the carriage (5 DOF) and a rigid rail moving along x (``rail_axis`` 0) or
+    y (1) on a spring ``k_rail`` to ground; each roller spring acts on the normal component of
+    carriage motion minus rail motion: g_c . q - n_axis r."""
     h3 = H1 + H0
     c, s = np.cos(BETA), np.sin(BETA)
     rows = [((-E, -H1), (c, s)), ((E, -H1), (-c, s)), ((-E, -h3), (c, -s)), ((E, -h3), (-c, -s))]
     K = np.zeros((6, 6))
-    for (x, y), (nx, ny) in rows:
+    for (x, y), normal in rows:
         for z in np.linspace(-LL / 2, LL / 2, ZL):
-            g = np.append(_g(np.array([x, y, z]), np.array([nx, ny, 0.0])), -nx)
+            g = np.append(_g(np.array([x, y, z]), np.array([*normal, 0.0])), -normal[rail_axis])
             K += kn * np.outer(g, g)
-    K[5, 5] += k_support
+    K[5, 5] += k_rail
+    return K
+
+
+def stiffness_with_lateral_support(k_support, kn=KN):
+    """5x5 carriage stiffness with the rail on a lateral spring to ground (massless rail, condensed)."""
+    K = _stiffness_with_rail(k_support, 0, kn)
     return K[:5, :5] - np.outer(K[:5, 5], K[5, :5]) / K[5, 5]
 
 
 def modes_with_vertical_base(base_mass, k_base, kn=KN):
     """6-DOF modes: the carriage on its rollers on a rail body of mass ``base_mass`` that moves
     vertically on a spring ``k_base`` to ground (the rollers act on carriage minus rail motion)."""
-    h3 = H1 + H0
-    c, s = np.cos(BETA), np.sin(BETA)
-    rows = [((-E, -H1), (c, s)), ((E, -H1), (-c, s)), ((-E, -h3), (c, -s)), ((E, -h3), (-c, -s))]
-    K = np.zeros((6, 6))
-    for (x, y), (nx, ny) in rows:
-        for z in np.linspace(-LL / 2, LL / 2, ZL):
-            g = np.append(_g(np.array([x, y, z]), np.array([nx, ny, 0.0])), -ny)
-            K += kn * np.outer(g, g)
-    K[5, 5] += k_base
+    K = _stiffness_with_rail(k_base, 1, kn)
     m = np.array([M, M, *J, base_mass])
     w2, v = np.linalg.eigh(K / np.sqrt(np.outer(m, m)))
     return np.sqrt(w2) / (2 * np.pi), v / np.sqrt(m)[:, None]
