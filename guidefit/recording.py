@@ -1062,6 +1062,26 @@ def _read_hdf5_structure(p: Path, display: str) -> Recording:
     return Recording(path=display, guide=guide, description=description, runs=runs)
 
 
+def _check_hit_range(run, first, last) -> None:
+    """Stored hits ``first:last`` must be a non-empty integer range of the run's hits."""
+    if not (
+        isinstance(first, (int, np.integer))
+        and isinstance(last, (int, np.integer))
+        and 0 <= first < last <= run.n_hits_stored
+    ):
+        raise ValueError(
+            f"first={first!r}, last={last!r}: expected 0 <= first < last <= {run.n_hits_stored} (run '{run.name}')"
+        )
+
+
+def _check_n_samples(run, n_samples) -> int:
+    """Samples per hit to read: all (``None``) or 1..run.n_samples."""
+    n = run.n_samples if n_samples is None else int(n_samples)
+    if not 0 < n <= run.n_samples:
+        raise ValueError(f"n_samples={n_samples!r}: expected 1..{run.n_samples} (run '{run.name}')")
+    return n
+
+
 def _check_version(value, where: str) -> None:
     arr = _numbers(value)
     if arr is None or arr.size != 1 or not float(arr.reshape(-1)[0]).is_integer():
@@ -1416,17 +1436,9 @@ class RunReader:
                 raise ValueError(
                     f"index={_name!r}: expected an integer in 0..{run.n_hits_stored - 1} (run '{run.name}')"
                 )
-        elif not (
-            isinstance(first, (int, np.integer))
-            and isinstance(last, (int, np.integer))
-            and 0 <= first < last <= run.n_hits_stored
-        ):
-            raise ValueError(
-                f"first={first!r}, last={last!r}: expected 0 <= first < last <= {run.n_hits_stored} (run '{run.name}')"
-            )
-        n = run.n_samples if n_samples is None else int(n_samples)
-        if not 0 < n <= run.n_samples:
-            raise ValueError(f"n_samples={n_samples!r}: expected 1..{run.n_samples} (run '{run.name}')")
+        else:
+            _check_hit_range(run, first, last)
+        n = _check_n_samples(run, n_samples)
         cols, reorder, scale = _column_index(run, channels)
         rows = slice(None) if n == run.n_samples else slice(0, n)
         if self._ds is not None and cols != slice(None):
@@ -1465,17 +1477,8 @@ class RunReader:
         run = self._run
         if run.layout != "hits":
             raise ValueError(f"run '{run.name}' has layout '{run.layout}'; read it with read_block")
-        if not (
-            isinstance(first, (int, np.integer))
-            and isinstance(last, (int, np.integer))
-            and 0 <= first < last <= run.n_hits_stored
-        ):
-            raise ValueError(
-                f"first={first!r}, last={last!r}: expected 0 <= first < last <= {run.n_hits_stored} (run '{run.name}')"
-            )
-        n = run.n_samples if n_samples is None else int(n_samples)
-        if not 0 < n <= run.n_samples:
-            raise ValueError(f"n_samples={n_samples!r}: expected 1..{run.n_samples} (run '{run.name}')")
+        _check_hit_range(run, first, last)
+        n = _check_n_samples(run, n_samples)
         rows = slice(None) if n == run.n_samples else slice(0, n)
         index = (slice(int(first), int(last)), rows)
         if out is None:
