@@ -1651,6 +1651,15 @@ def _unreproduced(measured, force_levels) -> list:
             and (m.run, _canonical(m.label)) in bad and good.get((m.run, _canonical(m.label)), 0) < 2]
 
 
+def _left_out_row(mode) -> dict:
+    """The result row of a measured mode left out of the explanation (no model pairing, no error)."""
+    return {"label": mode.label or "extra", "run": mode.run, "measured_hz": float(mode.frequency_hz),
+            "measured_std_hz": mode.frequency_std_hz, "identified_hz": float(mode.frequency_hz),
+            "sigma_hz": None, "model_before_hz": None, "model_before_label": None, "model_after_hz": None,
+            "model_after_label": None, "error_before_pct": None, "error_after_pct": None,
+            "mac_before": None, "mac_after": None, "status": "left out"}
+
+
 def _without_unreproduced(measured, drop, guide, sensors, force_levels, candidates, progress, source, notes,
                           drop_unproduced_extras) -> Explanation:
     """Explain without the modes of :func:`_unreproduced`; they are listed with status ``left out``."""
@@ -1662,12 +1671,7 @@ def _without_unreproduced(measured, drop, guide, sensors, force_levels, candidat
             "than its half-power half-bandwidth), so its frequency depends on which hits are averaged")
     sub = explain_modes(keep, guide, sensors, force_levels, candidates=candidates, progress=progress,
                         source=source, notes=(*notes, note), drop_unproduced_extras=drop_unproduced_extras)
-    left = [{"label": measured[i].label or "extra", "run": measured[i].run,
-             "measured_hz": float(measured[i].frequency_hz), "measured_std_hz": measured[i].frequency_std_hz,
-             "identified_hz": float(measured[i].frequency_hz), "sigma_hz": None, "model_before_hz": None,
-             "model_before_label": None, "model_after_hz": None, "model_after_label": None,
-             "error_before_pct": None, "error_after_pct": None, "mac_before": None, "mac_after": None,
-             "status": "left out"} for i in drop]
+    left = [_left_out_row(measured[i]) for i in drop]
     return replace(sub, modes=tuple(sub.modes) + tuple(left),
                    settings={**sub.settings, "left_out_unreproduced_hz": [float(measured[i].frequency_hz)
                                                                           for i in drop]})
@@ -1694,13 +1698,7 @@ def _without_extras(result, measured, extras, guide, sensors, force_levels, cand
     note = (f"extra peak(s) at {text} (unlabelled) left out: no candidate produces them together with the "
             "carriage modes; the effect below explains everything else (the peaks are a fit artefact, e.g. an "
             "amplitude-dependent peak fitted by two poles, or a cause outside the library)")
-    ignored = [{"label": measured[i].label or "extra", "run": measured[i].run,
-                "measured_hz": float(measured[i].frequency_hz),
-                "measured_std_hz": measured[i].frequency_std_hz,
-                "identified_hz": float(measured[i].frequency_hz), "sigma_hz": None, "model_before_hz": None,
-                "model_before_label": None, "model_after_hz": None, "model_after_label": None,
-                "error_before_pct": None, "error_after_pct": None, "mac_before": None, "mac_after": None,
-                "status": "left out"} for i in extras]
+    ignored = [_left_out_row(measured[i]) for i in extras]
     return replace(sub, notes=(note, *sub.notes, *notes), modes=tuple(sub.modes) + tuple(ignored),
                    settings={**sub.settings, "left_out_extra_hz": [float(measured[i].frequency_hz) for i in extras]})
 
