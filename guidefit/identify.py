@@ -92,6 +92,7 @@ class IdentifySettings:
 
     estimator: str = "H1"
     window: object = None  # guidefit.frf.WindowSettings
+    fft_precision: str = "auto"  # "auto" (that of the stored samples), "single" or "double"
     hits: object = None  # guidefit.hits.HitSettings
     f_min_hz: float | None = None
     f_max_hz: float | None = None
@@ -629,7 +630,8 @@ def _force_levels(run, frf, rows, modes, settings, warnings: list) -> list[dict]
         wanted = {accepted[i]["hit"] for i in members}
         hits = (h for h in iter_hits(run, settings.hits or HitSettings()) if h.index in wanted)
         try:
-            sub = frf_mod.compute_frf(run, hits, estimator=settings.estimator, window=window)
+            sub = frf_mod.compute_frf(run, hits, estimator=settings.estimator, window=window,
+                                      precision=frf.fft_precision)
         except IdentificationError as exc:
             warnings.append(f"run '{run.name}': force-level FRF failed ({exc})")
             return []
@@ -806,7 +808,8 @@ def run_frfs(recording, settings: IdentifySettings, warnings: list, failed: list
 
         hits = tapped(iter_hits(run, settings.hits or HitSettings()))
         try:
-            frf = compute_frf(run, hits, estimator=settings.estimator, window=settings.window or WindowSettings())
+            frf = compute_frf(run, hits, estimator=settings.estimator, window=settings.window or WindowSettings(),
+                              precision=settings.fft_precision)
         except IdentificationError as exc:
             text = str(exc)
             warnings.append(text if text.startswith(f"run '{run.name}'") else f"run '{run.name}': {text}")

@@ -196,6 +196,7 @@ class _H5Source:
 
     path: str  # absolute
     dataset: str  # e.g. "/runs/vertical/signals"
+    dtype: str = "<f8"  # of the stored samples (numpy dtype string)
 
 
 @dataclass(frozen=True, eq=False)
@@ -273,6 +274,15 @@ class Run:
     def response_indices(self) -> tuple[int, ...]:
         """Columns of the acceleration channels."""
         return tuple(i for i, ch in enumerate(self.channels) if ch.kind == "acceleration")
+
+    @property
+    def sample_dtype(self) -> np.dtype:
+        """dtype of the stored samples (float64 for CSV, whose text is parsed as float64)."""
+        source = self.source
+        if isinstance(source, _H5Source):
+            return np.dtype(source.dtype)
+        data = getattr(source, "data", None)
+        return np.dtype(getattr(data, "dtype", np.float64))
 
     @property
     def scale_to_si(self) -> np.ndarray:
@@ -1208,7 +1218,7 @@ def _read_hdf5_run(p: Path, display: str, runs_group, name: str) -> Run:
         n_samples=int(ds.shape[-2]),
         n_hits_stored=int(ds.shape[0]) if layout == "hits" else 0,
         pretrigger_samples=pretrigger,
-        source=_H5Source(os.path.abspath(p), ds.name),
+        source=_H5Source(os.path.abspath(p), ds.name, ds.dtype.str),
         force_index=force_index,
         file=display,
     )

@@ -463,16 +463,19 @@ def test_threads_and_hit_rows_give_the_same_bits(tmp_path):
     write_recording(tmp_path / "hits.h5", run)
     stored = read_recording(tmp_path / "hits.h5").runs[0]
     plain = np.stack([read_hit(stored, i) for i in range(hits)])
-    want = frf_from_records(plain, fs, pretrigger_samples=100, channel_names=stored.channel_names,
-                            run="vertical", workers=1)
-    assert want.exp_window_tau_s is not None and want.force_window_s is not None
-    for workers in (1, 2, 3):
-        got = compute_frf(stored, iter_hits(stored), workers=workers)
-        assert got.n_averages == hits
-        np.testing.assert_array_equal(got.H, want.H)
-        np.testing.assert_array_equal(got.coherence, want.coherence)
-        for key in want.group_sums:
-            np.testing.assert_array_equal(got.group_sums[key], want.group_sums[key])
+    # float32 samples: FFTs in single precision by default ("auto"), double on request
+    for precision, want_precision in (("auto", "single"), ("double", "double")):
+        want = frf_from_records(plain, fs, pretrigger_samples=100, channel_names=stored.channel_names,
+                                run="vertical", workers=1, precision=want_precision)
+        assert want.exp_window_tau_s is not None and want.force_window_s is not None
+        assert want.fft_precision == want_precision
+        for workers in (1, 2, 3):
+            got = compute_frf(stored, iter_hits(stored), workers=workers, precision=precision)
+            assert got.n_averages == hits and got.fft_precision == want_precision
+            np.testing.assert_array_equal(got.H, want.H)
+            np.testing.assert_array_equal(got.coherence, want.coherence)
+            for key in want.group_sums:
+                np.testing.assert_array_equal(got.group_sums[key], want.group_sums[key])
         assert (got.exp_window_tau_s, got.force_window_s) == (want.exp_window_tau_s,
                                                               want.force_window_s)
 

@@ -238,7 +238,7 @@ def test_time_fields_as_pyuff_reads_them(simulated):
 
 
 def test_time_round_trip_and_frfs(simulated):
-    from guidefit.identify import frf_of_recording
+    from guidefit.identify import IdentifySettings, frf_of_recording
 
     recording, h5_path, uff_path = simulated
     back = read_uff_recording(uff_path)
@@ -260,8 +260,11 @@ def test_time_round_trip_and_frfs(simulated):
     via_dispatch = read_recording(uff_path)
     assert [run.channel_names for run in via_dispatch.runs] == [r.channel_names for r in back.runs]
 
-    frf_h5, _ = frf_of_recording(h5_path)
+    # the same samples (float32 in the HDF5 file, float64 in the UFF): the same FFT precision
+    double = IdentifySettings(fft_precision="double")
+    frf_h5, _ = frf_of_recording(h5_path, double)
     frf_uff, _ = frf_of_recording(uff_path)
+    assert frf_h5[0].fft_precision == frf_uff[0].fft_precision == "double"
     assert [f.run for f in frf_uff] == [f.run for f in frf_h5]
     for a, b in zip(frf_h5, frf_uff):
         assert b.channels == a.channels and b.n_averages == a.n_averages == 2
