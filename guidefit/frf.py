@@ -705,16 +705,19 @@ class _Accumulator:
         ch = min(_CHUNK_BINS, self.F)
         if self._bufs is None or self._bufs[0].shape[0] < n:
             r = self.c - 1
-            real = Z.real.dtype
-            self._bufs = (np.empty((n, self.c, ch), real), np.empty((n, self.c, ch), real),
-                          np.empty((n, ch), dtype=Z.dtype), np.empty((n, r, ch), dtype=Z.dtype))
-        sq, tmp, fcb, pcb = self._bufs  # |Z|^2 and F* X in Z's precision, summed in float64
+            self._bufs = (np.empty((n, self.c, ch)), np.empty((n, self.c, ch)),
+                          np.empty((n, ch), dtype=complex), np.empty((n, r, ch), dtype=complex),
+                          np.empty((n, self.c, ch), dtype=complex))
+        sq, tmp, fcb, pcb, up = self._bufs
+        single = Z.dtype != np.complex128  # complex64 spectra: products and sums in float64
         runs = list(_group_runs(i0, n, self.n_groups))
         fi, resp = self.fi, self.resp
         for a in range(0, self.F, ch):
             b = min(a + ch, self.F)
             m = b - a
             z = Z[:, :, a:b]
+            if single:
+                z = np.copyto(up[:n, :, :m], z) or up[:n, :, :m]
             s, t = sq[:n, :, :m], tmp[:n, :, :m]
             np.multiply(z.real, z.real, out=s)
             np.multiply(z.imag, z.imag, out=t)
