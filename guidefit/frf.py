@@ -816,9 +816,9 @@ def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windo
     first = first[:k]
     fi = force_index
     w_force, w_resp = windows(first)
-    window_t = np.empty((c, n))
-    window_t[:] = np.asarray(w_resp, dtype=float)
-    window_t[fi] = np.asarray(w_force, dtype=float)
+    w_pair = (np.array(w_force, dtype=float), np.array(w_resp, dtype=float))  # (n,) each
+    window_rows = [w_pair[0] if ch == fi else w_pair[1] for ch in range(c)]  # views, per channel
+    window_t = np.stack(window_rows)  # (C, n), for the first records only
     # a hammer pushes nothing after the force window: the force there is the sensor's offset
     quiet = np.flatnonzero(window_t[fi] == 0.0)[-512:] if force_offset else np.empty(0)
     quiet = quiet if quiet.size >= 16 else None  # the last <= 512 quiet samples: plenty, cheap
@@ -853,10 +853,12 @@ def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windo
                 first = None
         if k < block:
             for _, record in source:
-                np.multiply(record.T, window_t, out=buf[k])
+                rows = record.T
+                for ch in range(c):  # row by row: the two window rows stay in cache
+                    np.multiply(rows[ch], window_rows[ch], out=buf[k, ch])
                 if quiet is not None:  # force offset (sensor bias): out of the windowed force
-                    buf[k, fi] -= _force_offset(record[quiet, fi], buf[k, fi]) * window_t[fi]
-                del record
+                    buf[k, fi] -= _force_offset(record[quiet, fi], buf[k, fi]) * window_rows[fi]
+                del record, rows  # the hit's buffer may be reused (guidefit.hits._rows_buffer)
                 k += 1
                 if k == block:
                     break
