@@ -164,6 +164,12 @@ def _identify_one(path, guide, settings):
         return 1, None, f"{path}: internal error: {type(exc).__name__}: {exc} (please report this file)"
 
 
+#: ``--fft-precision`` of ``identify`` and ``frf`` (the choices of guidefit.frf.PRECISIONS).
+_fft_precision_option = click.option(
+    "--fft-precision", type=click.Choice(["auto", "single", "double"]), default="auto", show_default=True,
+    help="Precision the FFTs compute in; auto: that of the stored samples (float32 files: single).")
+
+
 @main.command(name="identify")
 @click.argument("files", nargs=-1, required=True, type=click.Path())
 @click.option("--guide", "guide_name", help="Guide name or TOML (default: the file's guide attribute, else MRB35).")
@@ -179,8 +185,9 @@ def _identify_one(path, guide, settings):
 @click.option("--jobs", default=1, show_default=True, type=click.IntRange(1, 64),
               help="Files processed in parallel.")
 @click.option("--no-jackknife", is_flag=True, help="Skip the hit-group jackknife (faster, fit std only).")
+@_fft_precision_option
 def identify_cmd(files, guide_name, estimator, as_json, csv_path, summary_path, plot_path, check_path,
-                 junit_path, jobs, no_jackknife):
+                 junit_path, jobs, no_jackknife, fft_precision):
     """Identify K_V, K_H, c_V, c_H from hammer recordings (Eq. 24-29)."""
     import time
     from pathlib import Path
@@ -193,7 +200,7 @@ def identify_cmd(files, guide_name, estimator, as_json, csv_path, summary_path, 
         from guidefit.check import load_spec
 
         spec = load_spec(check_path)
-    settings = IdentifySettings(estimator=estimator, jackknife=not no_jackknife)
+    settings = IdentifySettings(estimator=estimator, jackknife=not no_jackknife, fft_precision=fft_precision)
     started = time.perf_counter()
     worst, rows, outcomes = 0, [], []
     console = report._console(stderr=as_json)
@@ -312,12 +319,14 @@ def _parse_window(text: str | None):
                    "its end level).")
 @click.option("--out", "out_path", type=click.Path(dir_okay=False),
               help="frf.csv, frf.h5 or frf.uff (UFF-58, needs pyuff); default: a summary on the terminal.")
-def frf_cmd(recording, estimator, window_text, out_path):
+@_fft_precision_option
+def frf_cmd(recording, estimator, window_text, out_path, fft_precision):
     """FRFs (H1/H2/Hv) and coherence of every response channel of any recording."""
     from guidefit import report
     from guidefit.identify import IdentifySettings, frf_of_recording
 
-    settings = IdentifySettings(estimator=estimator, window=_parse_window(window_text))
+    settings = IdentifySettings(estimator=estimator, window=_parse_window(window_text),
+                                fft_precision=fft_precision)
     frfsets, warnings = frf_of_recording(recording, settings)
     for w in warnings:
         click.echo(f"guidefit: warning: {w}", err=True)

@@ -87,3 +87,70 @@ def test_every_command_is_documented():
     text = (ROOT / "README.md").read_text() + "".join(p.read_text() for p in (ROOT / "docs").glob("*.md"))
     for name in main.commands:
         assert re.search(rf"guidefit {name}\b", text), f"command '{name}' is not documented"
+
+
+# ------------------------------------------------------------------ --fft-precision
+
+
+@pytest.fixture(scope="module")
+def float32_recordings(tmp_path_factory):
+    """Two small simulated recordings stored as float32 (as ``guidefit simulate`` writes them)."""
+    from dataclasses import replace
+
+    from guidefit.simulate import SimulationConfig, write_simulation
+
+    folder = tmp_path_factory.mktemp("fft_precision")
+    config = replace(SimulationConfig(), hits=4, record_s=0.05)
+    return [write_simulation(folder / f"rec{seed}.h5", "MRB35", config=config, seed=seed).recordings[0]
+            for seed in (1, 2)]
+
+
+@pytest.mark.parametrize("args, expected", [
+    ((), "single"),  # auto: the file stores float32
+    (("--fft-precision", "auto"), "single"),
+    (("--fft-precision", "single"), "single"),
+    (("--fft-precision", "double"), "double"),
+])
+def test_frf_fft_precision_is_written_to_the_h5(tmp_path, float32_recordings, args, expected):
+    from guidefit.frf import read_frf_h5
+
+    out = tmp_path / "frf.h5"
+    result = run("frf", str(float32_recordings[0]), "--out", str(out), *args)
+    assert result.exit_code == 0, result.output
+    assert [frf.fft_precision for frf in read_frf_h5(out)] == [expected, expected]
+
+
+def test_identify_fft_precision_reaches_every_worker(float32_recordings):
+    """--jobs 2 (a process per file) gives the results of --jobs 1, and double differs from single."""
+
+    def values(*args):
+        result = run("identify", *map(str, float32_recordings), "--json", "--no-jackknife", *args)
+        assert result.exit_code == 0, result.output
+        objs = [json.loads(line) for line in result.output.strip().splitlines()]
+        return [{k: p["value"] for k, p in o["parameters"].items()} for o in objs]
+
+    double = values("--fft-precision", "double")
+    assert values("--fft-precision", "double", "--jobs", "2") == double
+    single = values()  # auto on float32 files
+    assert values("--fft-precision", "single", "--jobs", "2") == single
+    # float32 FFTs move the damping ratios by ~1e-8 relative (tests/test_frf_precision.py): not the same bits
+    assert [v["zeta_V"] for v in single] != [v["zeta_V"] for v in double]
+    for s, d in zip(single, double):
+        assert s["zeta_V"] == pytest.approx(d["zeta_V"], rel=1e-7)
+
+
+@pytest.mark.parametrize("command", ["identify", "frf"])
+def test_bad_fft_precision_exits_2_with_one_line(command):
+    result = run(command, "x.h5", "--fft-precision", "quad")
+    assert result.exit_code == 2, result.output
+    lines = result.output.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("guidefit: error:"), result.output
+    assert "--fft-precision" in lines[0] and "'quad'" in lines[0] and "auto" in lines[0]
+
+
+def test_fft_precision_choices_are_the_librarys():
+    from guidefit.frf import PRECISIONS
+
+    for name in ("identify", "frf"):
+        (option,) = [p for p in main.commands[name].params if p.name == "fft_precision"]
+        assert tuple(option.type.choices) == PRECISIONS and option.default == "auto"
