@@ -774,7 +774,9 @@ def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windo
     ``items`` (for hits: reads and checks them) and windows them into a block
     buffer; ``workers - 1`` helper threads transform the blocks and add their
     spectra to the sums (``scipy.fft`` and numpy's ufuncs release the GIL, so
-    this overlaps the reading and checking). With ``workers=1`` everything
+    this overlaps the reading and checking). When the helpers fall behind (a
+    block waits for one), the calling thread transforms its next block
+    itself, so that neither side idles while the other has work. With ``workers=1`` everything
     runs on the calling thread. The sums are added block after block in hit
     order, so the result does not depend on the number of threads or their
     timing. Returns ``None`` when there is no record. ``force_offset``:
@@ -799,7 +801,7 @@ def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windo
             n_first = max(1, min(_WINDOW_HITS, _WINDOW_BYTES // (8 * n * c)))
             block = _block_size(n, c)
             helpers = workers - 1  # threads besides the calling one
-            n_bufs = helpers + 1  # one being filled, one per helper
+            n_bufs = helpers + 2 if helpers else 1  # one being filled, one per helper, one queued
             if dtype == np.float64:  # the first records straight into the block buffers
                 space = np.empty((max(n_bufs * block, n_first), c, n))
                 first = space[:n_first]
@@ -905,7 +907,10 @@ def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windo
             for future in [f for f in futures if f.done()]:
                 future.result()  # re-raises a helper's error
                 futures.remove(future)
-            futures.append(pool.submit(transform, turn, k, acc.n_hits, number))
+            if any(not (f.running() or f.done()) for f in futures):
+                transform(turn, k, acc.n_hits, number)  # the helpers are behind: this block here
+            else:
+                futures.append(pool.submit(transform, turn, k, acc.n_hits, number))
             number += 1
             acc.n_hits += k
             turn = (turn + 1) % n_bufs
