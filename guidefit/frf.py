@@ -117,6 +117,7 @@ A force pulse through a known filter, eight hits, no windows:
 from __future__ import annotations
 
 import math
+import threading
 import warnings
 from collections import Counter
 from collections.abc import Callable, Iterable, Iterator, Sequence
@@ -758,9 +759,50 @@ def _force_offset(quiet_force: np.ndarray, pulse_force: np.ndarray) -> float:
     return base if abs(base) > FORCE_OFFSET_FRACTION * max(float(pulse_force.max()), -float(pulse_force.min())) else 0.0
 
 
+class _Buffers:
+    """The memory of one :func:`_run_blocks` call: sums, block buffers, first records.
+
+    ``touch``: write every page now (the first touch of fresh memory costs a
+    page fault per 4 kB, about 60 MB here), so that a thread with nothing
+    else to do can pay for it while another one reads the first pass over
+    the force.
+    """
+
+    def __init__(self, n, c, dtype, force_index, n_groups, workers, touch=False):
+        self.key = (n, c, np.dtype(dtype), force_index, n_groups, workers)
+        self.n_first = max(1, min(_WINDOW_HITS, _WINDOW_BYTES // (8 * n * c)))
+        self.block = _block_size(n, c)
+        self.n_bufs = workers + 1 if workers > 1 else 1  # one being filled, one per helper, one queued
+        if dtype == np.float64:  # the first records straight into the block buffers
+            self.space = np.empty((max(self.n_bufs * self.block, self.n_first), c, n))
+            self.first = self.space[:self.n_first]
+        else:  # the windows are chosen from float64 copies, then rounded into the buffers
+            self.first = np.empty((self.n_first, c, n))
+            self.space = np.empty((self.n_bufs * self.block, c, n), dtype=dtype)
+        self.acc = _Accumulator(n, c, force_index, n_groups, workers)
+        if touch:
+            for a in (self.space, self.first, self.acc.sff, self.acc.sxx, self.acc.sfx):
+                a.fill(0)
+
+
+def _early_buffers(expect, precision, force_index, n_groups, workers):
+    """:class:`_Buffers` for records of shape ``expect`` (n_samples, n_channels), made and
+    touched by a thread of their own while the caller goes on; ``None`` when there is
+    nothing to expect or no second thread. ``.result()`` waits for them."""
+    if expect is None or workers < 2:
+        return None
+    from concurrent.futures import ThreadPoolExecutor
+
+    n, c = (int(v) for v in expect)
+    pool = ThreadPoolExecutor(max_workers=1)
+    future = pool.submit(_Buffers, n, c, fft_dtype(precision), force_index, n_groups, workers, True)
+    pool.shutdown(wait=False)  # the thread ends with the job
+    return future
+
+
 def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windows,
                 n_groups: int, workers: int, force_offset: bool = False,
-                precision: str = "auto") -> _Accumulator | None:
+                precision: str = "auto", expect=None) -> _Accumulator | None:
     """Window, FFT and accumulate all records, a few hits per FFT call.
 
     ``windows(first)`` gets the first (up to ``_WINDOW_HITS``) raw records as
@@ -784,13 +826,16 @@ def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windo
     0, see :func:`_force_offset`). ``precision``: of the block buffers and
     FFTs (:func:`fft_dtype`; ``"auto"`` from the first record's dtype); the
     windows are chosen and multiplied in float64 either way, and the product
-    rounded once into the block buffer.
+    rounded once into the block buffer. ``expect``: the (n_samples,
+    n_channels) the records will have, if known: their memory is then made
+    by another thread while the first record is pulled (for stored hits,
+    while the first pass reads the force of every hit).
     """
-    import threading
     from concurrent.futures import ThreadPoolExecutor
 
     import scipy.fft
 
+    early = _early_buffers(expect, precision, force_index, n_groups, workers)
     source = iter(items)
     first = None  # the first records, (hits, C, n); in the block buffers when they fit
     k = 0
@@ -798,16 +843,15 @@ def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windo
         if first is None:
             n, c = record.shape
             dtype = fft_dtype(precision, record.dtype)
-            n_first = max(1, min(_WINDOW_HITS, _WINDOW_BYTES // (8 * n * c)))
-            block = _block_size(n, c)
+            key = (n, c, np.dtype(dtype), force_index, n_groups, workers)
+            mem = early.result() if early is not None else None
+            if mem is None or mem.key != key:
+                mem = _Buffers(n, c, dtype, force_index, n_groups, workers)
+            early = None
+            n_first, block, n_bufs = mem.n_first, mem.block, mem.n_bufs
+            space, first, acc = mem.space, mem.first, mem.acc
+            del mem
             helpers = workers - 1  # threads besides the calling one
-            n_bufs = helpers + 2 if helpers else 1  # one being filled, one per helper, one queued
-            if dtype == np.float64:  # the first records straight into the block buffers
-                space = np.empty((max(n_bufs * block, n_first), c, n))
-                first = space[:n_first]
-            else:  # the windows are chosen from float64 copies, then rounded into the buffers
-                first = np.empty((n_first, c, n))
-                space = np.empty((n_bufs * block, c, n), dtype=dtype)
         np.copyto(first[k], record.T)
         k += 1
         if k == n_first:
@@ -837,7 +881,6 @@ def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windo
     free = [threading.Event() for _ in range(n_bufs)]  # set: the buffer may be refilled
     for event in free:
         event.set()
-    acc = _Accumulator(n, c, fi, n_groups, workers)
     acc.precision = _precision_name(dtype)
 
     def fill(turn: int) -> int:
@@ -1376,13 +1419,16 @@ def compute_frf(
                 rejected[getattr(hit, "reason", None) or "rejected"] += 1
 
     dtype = fft_dtype(precision, getattr(run, "sample_dtype", np.float64))
+    # stored hits have the run's n_samples (a continuous run's records have another length)
+    expect = (int(run.n_samples), len(names)) if getattr(run, "layout", None) == "hits" else None
     return _frf(accepted(), run.sample_rate_hz, run.force_index, names, estimator, window,
                 run.pretrigger_samples, str(run.name), n_groups, workers, len(names), rejected,
-                _precision_name(dtype))
+                _precision_name(dtype), expect)
 
 
 def _frf(items, sample_rate_hz, force_index, channel_names, estimator, window,
-         pretrigger_samples, run, n_groups, workers, n_channels, rejected, precision) -> FrfSet:
+         pretrigger_samples, run, n_groups, workers, n_channels, rejected, precision,
+         expect=None) -> FrfSet:
     _check_estimator(estimator)
     fft_dtype(precision)  # checked before any record is read
     n_groups = _check_groups(n_groups)
@@ -1406,7 +1452,7 @@ def _frf(items, sample_rate_hz, force_index, channel_names, estimator, window,
 
     items = _checked_force(_validated(items, run, n_channels), fi, run)
     acc = _run_blocks(items, fi, windows, n_groups, max(1, int(workers)), force_offset=True,
-                      precision=precision)
+                      precision=precision, expect=expect)
     if acc is None:
         reasons = ", ".join(f"{r} x{k}" for r, k in sorted(rejected.items()))
         detail = f" ({sum(rejected.values())} rejected: {reasons})" if rejected else ""

@@ -720,3 +720,26 @@ def test_h5_round_trip(tmp_path, two_runs):
     assert back["vertical"].with_estimator("H2").H == pytest.approx(a.with_estimator("H2").H)
     with pytest.raises(ValueError, match="not usable as an HDF5 group"):
         write_frf_h5(tmp_path / "bad.h5", [a, a])
+
+
+def test_memory_made_early_for_another_shape_is_not_used():
+    """compute_frf makes the sums and buffers of a stored-hits run early, for
+    (n_samples, n_channels) of the run; hits of another length must not use
+    them, and the result must equal that of a run that announces nothing."""
+    from types import SimpleNamespace as NS
+
+    rng = np.random.default_rng(5)
+    data = rng.normal(size=(6, 64, 2))
+    data[:, 2:5, 0] += [[1.0, 3.0, 1.0]]
+    hits = [NS(index=i, accepted=True, data=d, reason=None) for i, d in enumerate(data)]
+    channels = (NS(name="force"), NS(name="acc_A_y"))
+    base = dict(name="vertical", sample_rate_hz=1000.0, force_index=0, pretrigger_samples=2,
+                channels=channels)
+    announced = NS(**base, layout="hits", n_samples=128)  # says 128, the hits have 64
+    plain = NS(**base)
+    for workers in (1, 2):
+        got = compute_frf(announced, hits, workers=workers)
+        want = compute_frf(plain, hits, workers=workers)
+        assert got.H.shape == (33, 1)
+        np.testing.assert_array_equal(got.H, want.H)
+        np.testing.assert_array_equal(got.group_sums["Sff"], want.group_sums["Sff"])
