@@ -891,13 +891,65 @@ def iter_hits(
     return _signal_hits(run, settings, int(chunk_samples))
 
 
+def _force_peak(force: np.ndarray, pre: int | None):
+    """(peak, baseline) of one stored hit's force (float64 SI): the peak is
+    max |force - baseline| (None when no finite baseline exists: the hit adds
+    no peak to the run's median), the baseline the median of the pretrigger
+    or of all the force (None unless every sample is finite)."""
+    hi, lo = float(force.max()), float(force.min())  # NaN if a NaN, +-Inf if an Inf
+    if math.isfinite(hi) and math.isfinite(lo):
+        median = _median(force[: pre - 2] if pre is not None and pre >= 16 else force)
+        # max |force - median| from the extremes: rounding is monotone
+        hi, lo = hi - median, lo - median
+        return abs(hi if hi >= -lo else lo), median
+    finite = np.isfinite(force)
+    quiet = finite[: pre - 2] if pre is not None and pre >= 16 else finite
+    base = force[: quiet.size][quiet]
+    if base.size:
+        return abs(_signed_extreme(force[finite] - _median(base))), None
+    return None, None
+
+
+def _median_upper_bound(values, n_unknown: int) -> float | None:
+    """The largest ``np.median`` of ``values`` plus up to ``n_unknown`` more values
+    (each absent or anything): the median with ``n_unknown`` values of +inf.
+    ``inf`` when the unknown could decide it; None when there is no value at all."""
+    ordered = sorted(values)
+    n = len(ordered) + n_unknown
+    if n == 0:
+        return None
+
+    def at(k):
+        return ordered[k] if k < len(ordered) else math.inf
+
+    return float(at(n // 2)) if n % 2 else (at(n // 2 - 1) + at(n // 2)) / 2
+
+
+def _partial_start(n_hits: int) -> int:
+    """First hit of the first pass over the force: the last ``n_hits // 2 + 2`` hits,
+    enough to bound the run's median peak from above before the first hit is judged."""
+    return max(0, n_hits - (n_hits // 2 + 2))
+
+
 def _stored_hits(run: Run, s: HitSettings, length: int) -> Iterator[Hit]:
-    """Two passes with the file open once: the force of every hit (for the
-    run's median peak), then each hit in full. A run of at most
-    ``_CACHE_BYTES`` (as float64) is read only once; a larger one has its hits
-    read in blocks of at most ``_READ_BYTES`` (as float64) for the force.
-    Samples are read as stored and converted to float64 SI once, straight
-    into the layout each pass works on (see :func:`_check_raw`)."""
+    """Stored hits, judged in order, with the file open once.
+
+    The ``too_weak`` check needs the run's median peak. A first pass reads the
+    force of the last ``n_hits // 2 + 2`` hits; with those, and the peaks of
+    the hits judged so far, the median of all peaks is bounded from above
+    (:func:`_median_upper_bound`). A hit that is not too weak against the bound
+    is not too weak against the median either (the limit grows with the
+    median) and is judged exactly as with the median; only a hit that is too
+    weak against the bound (or the first hit, if the bound is not finite yet)
+    makes the force of the hits not read yet be read, and from then on the
+    median is exact. So each hit's force is read about 1.5 times, not twice,
+    and every decision, reason and metric is that of the median of all peaks.
+
+    A run of at most ``_CACHE_BYTES`` (as float64) is read only once and
+    kept; a larger one has its hits read in blocks of at most ``_READ_BYTES``
+    (as float64) for the force. Samples are read as stored and converted to
+    float64 SI once, straight into the layout each pass works on (see
+    :func:`_check_raw`)."""
     fi = run.force_index
     pre = run.pretrigger_samples
     n_hits = run.n_hits_stored
@@ -910,47 +962,61 @@ def _stored_hits(run: Run, s: HitSettings, length: int) -> Iterator[Hit]:
         cache = None
         if n_hits * length * n_channels * 8 <= _CACHE_BYTES:
             cache = reader.read_hits_raw(0, n_hits, length)
-            blocks = [(0, cache)]
+            per, block = n_hits, None
         else:
             per = min(n_hits, max(1, _READ_BYTES // (8 * length * n_channels)))
             block = np.empty((per, length, n_channels), dtype=reader.dtype)
-            blocks = (
-                (i0, reader.read_hits_raw(i0, i1, length, out=block[: i1 - i0]))
-                for i0 in range(0, n_hits, per)
-                for i1 in [min(n_hits, i0 + per)]
-            )
-        peaks = []
+        peaks: dict[int, float] = {}  # hit -> peak (a hit without a finite baseline has none)
         bases = [None] * n_hits  # force baseline of each all-finite force, reused below
-        forces = None
-        for i0, raw in blocks:
-            if forces is None or forces.shape[0] < raw.shape[0]:
-                forces = np.empty(raw.shape[:2])
-            force_rows = forces[: raw.shape[0]]
-            np.copyto(force_rows, raw[:, :, fi])
-            if scale is not None:
-                force_rows *= scale[fi]
-            for k, force in enumerate(force_rows):
-                hi, lo = float(force.max()), float(force.min())  # NaN if a NaN, +-Inf if an Inf
-                if math.isfinite(hi) and math.isfinite(lo):
-                    median = _median(force[: pre - 2] if pre is not None and pre >= 16 else force)
-                    bases[i0 + k] = median
-                    # max |force - median| from the extremes: rounding is monotone
-                    hi, lo = hi - median, lo - median
-                    peaks.append(abs(hi if hi >= -lo else lo))
-                    continue
-                finite = np.isfinite(force)
-                quiet = finite[: pre - 2] if pre is not None and pre >= 16 else finite
-                base = force[: quiet.size][quiet]
-                if base.size:
-                    peaks.append(abs(_signed_extreme(force[finite] - _median(base))))
-        del forces, blocks, raw
-        median_peak = float(np.median(peaks)) if peaks else None
+        forces = np.empty((min(per, n_hits), length))
+
+        def force_pass(h0: int, h1: int) -> None:
+            """Peaks and baselines of hits h0..h1-1 from their forces."""
+            for i0 in range(h0, h1, per):
+                i1 = min(h1, i0 + per)
+                raw = cache[i0:i1] if cache is not None else reader.read_hits_raw(
+                    i0, i1, length, out=block[: i1 - i0])
+                force_rows = forces[: i1 - i0]
+                np.copyto(force_rows, raw[:, :, fi])
+                if scale is not None:
+                    force_rows *= scale[fi]
+                for k, force in enumerate(force_rows):
+                    peak, bases[i0 + k] = _force_peak(force, pre)
+                    if peak is not None:
+                        peaks[i0 + k] = peak
+
+        def exact_median() -> float | None:
+            return float(np.median(list(peaks.values()))) if peaks else None
+
+        first_read = 0 if cache is not None else _partial_start(n_hits)
+        force_pass(first_read, n_hits)
+        exact = first_read == 0  # False: the median is only bounded so far
+        median = exact_median() if exact else None
+        own = np.empty((1, length))  # the force of the hit being judged
         one = None if cache is not None else np.empty((1, length, n_channels), dtype=reader.dtype)
         spare: list[np.ndarray] = []  # rows of earlier hits, reused once nothing else holds them
         for i in range(n_hits):
             raw = cache[i] if cache is not None else reader.read_hits_raw(i, i + 1, length, out=one)[0]
+            if not exact:
+                if i < first_read:  # this hit's own peak, as the first pass takes it
+                    np.copyto(own[0], raw[:, fi])
+                    if scale is not None:
+                        own *= scale[fi]
+                    peak, bases[i] = _force_peak(own[0], pre)
+                    if peak is not None:
+                        peaks[i] = peak
+                bound = _median_upper_bound(peaks.values(), max(0, first_read - i - 1))
+                if bound is not None and math.isfinite(bound):
+                    hit = _check_raw(run, raw, _rows_buffer(spare, (n_channels, length)), scale, s,
+                                     i, pre, bound, bases[i])
+                    if "too_weak" not in hit.codes:
+                        yield hit
+                        continue
+                    del hit
+                force_pass(i + 1, first_read)  # the rest of the force: the exact median
+                median, exact = exact_median(), True
             yield _check_raw(run, raw, _rows_buffer(spare, (n_channels, length)), scale, s, i,
-                             pre, median_peak, bases[i])
+                             pre, median, bases[i])
 
 
 def _rows_buffer(spare: list, shape: tuple[int, int]) -> np.ndarray:

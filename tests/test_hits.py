@@ -846,3 +846,68 @@ def test_iter_hits_reuses_row_buffers_only_when_released(tmp_path):
     assert all(h.accepted for h in kept)
     for i, hit in enumerate(kept):
         np.testing.assert_array_equal(hit.data, records[i])
+
+
+def test_first_pass_over_half_the_force_judges_as_the_full_median(tmp_path, monkeypatch):
+    """The first pass reads the force of the last n // 2 + 2 stored hits only; each
+    hit is judged against an upper bound of the run's median peak and, if too weak
+    against it, against the exact median (the rest of the force read then). The
+    decisions, reasons, peaks and metrics must be those of the full two-pass
+    reference, for weak hits early, late and first, a non-finite force, and
+    median-fraction limits that make none, some or most hits too weak."""
+    import dataclasses
+
+    from guidefit.recording import RunReader
+
+    rng = np.random.default_rng(17)
+    n, hits = 3000, 12
+    peaks = np.array([3.0, 60, 75, 2.5, 90, 55, 120, 70, 65, 4.0, 80, 58])  # weak: 0, 3, 9
+    records = np.zeros((hits, n, 3), dtype=np.float32)
+    for i in range(hits):
+        records[i, :, 0] = half_sine(n, 150, peaks[i]) + rng.normal(0, 0.01, n)
+        records[i, :, 1] = ringing(n, 150, 0.3 * peaks[i]) + rng.normal(0, 0.01, n)
+        records[i, :, 2] = ringing(n, 150, 0.2 * peaks[i], f_hz=2100.0) + rng.normal(0, 0.01, n)
+    records[7, 1000, 0] = np.nan  # in the first pass's half: a peak from the finite samples
+    run = RunData("vertical", FS, [0, -1, 0], NAMES, ["N", "m/s^2", "m/s^2"],
+                  [[0, 0, 0], [0.03, 0, 0.045], [-0.03, 0, 0.045]],
+                  [[0, -1, 0], [0, 1, 0], [0, 1, 0]], data=records, layout="hits",
+                  pretrigger_samples=150)
+    write_recording(tmp_path / "weak.h5", run)
+    stored = read_recording(tmp_path / "weak.h5").runs[0]
+    monkeypatch.setattr(hits_module, "_CACHE_BYTES", 0)
+    monkeypatch.setattr(hits_module, "_READ_BYTES", 3 * 8 * n * 3)  # blocks of 3 hits
+    read = []
+    original = RunReader.read_hits_raw
+
+    def counting(self, first, last, *args, **kwargs):
+        read.append(last - first)
+        return original(self, first, last, *args, **kwargs)
+
+    monkeypatch.setattr(RunReader, "read_hits_raw", counting)
+    for fraction in (0.01, 0.05, 0.5, 0.9, 0.99):
+        s = HitSettings(min_peak_fraction=fraction)
+        want = _reference_stored_hits(stored, s, n)
+        read.clear()
+        _assert_same_hits([_as_tuple(h) for h in iter_hits(stored, s)], want)
+        weak = [w[0] for w in want if "too_weak" in w[4]]
+        if fraction == 0.01:  # nobody too weak: the force of 8 of the 12 hits read once more
+            assert weak == [] and sum(read) == hits + hits // 2 + 2
+        else:  # hit 0 is too weak: the force of hits 1-3 is read at once, then every hit
+            assert 0 in weak and sum(read) == 2 * hits - 1
+    # a weak hit after strong ones (hit 2, before the first pass's half): the exact median mid-way
+    swapped = records.copy()
+    swapped[[0, 2]] = records[[2, 0]]
+    write_recording(tmp_path / "weak2.h5", dataclasses.replace(run, data=swapped))
+    stored = read_recording(tmp_path / "weak2.h5").runs[0]
+    for fraction in (0.05, 0.5):
+        s = HitSettings(min_peak_fraction=fraction)
+        want = _reference_stored_hits(stored, s, n)
+        assert "too_weak" not in want[0][4] and "too_weak" in want[2][4]
+        _assert_same_hits([_as_tuple(h) for h in iter_hits(stored, s)], want)
+    # the bound is an upper bound of np.median with unknown values absent or anything
+    values = [5.0, 1.0, 3.0]
+    for extra in ([], [0.0], [10.0], [0.0, 0.0], [10.0, 10.0], [2.0, 4.0]):
+        bound = hits_module._median_upper_bound(values, 2)
+        assert float(np.median(values + extra)) <= bound
+    assert hits_module._median_upper_bound([], 0) is None
+    assert hits_module._median_upper_bound([1.0], 1) == float("inf")
