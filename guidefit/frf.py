@@ -833,7 +833,7 @@ def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windo
     rounded once into the block buffer. ``expect``: the (n_samples,
     n_channels) the records will have, if known: their memory is then made
     by another thread while the first record is pulled (for stored hits,
-    while the first pass reads the force of every hit).
+    while the first pass reads the force of the hits).
     """
     from concurrent.futures import ThreadPoolExecutor
 
