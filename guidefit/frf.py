@@ -59,7 +59,11 @@ FRF is the windowed system's FRF times :math:`F(s)/F(s+\sigma_w)`, about
 
 Averaging and uncertainty
 -------------------------
-Hit ``i`` (counting accepted hits from 0) is added to group ``i % G``; the
+Hit ``i`` (counting accepted hits from 0) is added to group ``i % G``, or,
+in :func:`compute_frf` for a run of at least ``PAIR_HITS_PER_GROUP * G`` (32)
+stored hits, to group ``(i // 2) % G`` (two consecutive hits per group turn:
+every group still gets hits, and the group sums are read and written once
+per two hits, the largest memory traffic of the engine); the
 per-group sums (``FrfSet.group_sums``) allow a delete-a-group jackknife
 (:func:`jackknife_frf`, :meth:`FrfSet.leave_one_group_out`) of any quantity
 derived from the FRFs. Memory is O(G F R) whatever the number of hits: hits are
@@ -658,14 +662,26 @@ def exponential_window_damping_correction(zeta_measured, f_n_hz, tau_s):
 # --------------------------------------------------------------------------- accumulation
 
 
-def _group_runs(i0: int, n: int, n_groups: int):
-    """Split hits i0..i0+n-1 into runs (j0, j1, g0) of consecutive, distinct groups."""
+def _group_runs(i0: int, n: int, n_groups: int, pair: int = 1):
+    """Split hits i0..i0+n-1 into runs (j0, j1, g0): hit i goes to group
+    ``(i // pair) % n_groups``; with ``pair=1`` a run is consecutive hits in
+    consecutive, distinct groups, with ``pair=2`` one or two hits of one group."""
     j = 0
     while j < n:
-        g0 = (i0 + j) % n_groups
-        m = min(n - j, n_groups - g0)
+        if pair == 1:
+            g0 = (i0 + j) % n_groups
+            m = min(n - j, n_groups - g0)
+        else:
+            g0 = ((i0 + j) // pair) % n_groups
+            m = min(n - j, pair - (i0 + j) % pair)
         yield j, j + m, g0
         j += m
+
+
+#: Runs of at least this many stored hits per jackknife group put two consecutive hits
+#: in each group (``pair=2``): every group still gets hits, and the group sums, the
+#: largest memory traffic of the engine, are read and written once per two hits.
+PAIR_HITS_PER_GROUP = 4
 
 
 def _response_index(force_index: int, n_channels: int):
@@ -684,11 +700,12 @@ class _Accumulator:
     :meth:`group_sums` exposes (G, F, R) views.
     """
 
-    def __init__(self, n_samples, n_channels, force_index, n_groups, workers):
+    def __init__(self, n_samples, n_channels, force_index, n_groups, workers, pair=1):
         self.n = n_samples
         self.c = n_channels
         self.fi = force_index
         self.n_groups = n_groups
+        self.pair = pair
         self.workers = workers
         self.F = n_samples // 2 + 1
         self.resp = _response_index(force_index, n_channels)
@@ -711,7 +728,7 @@ class _Accumulator:
                           np.empty((n, self.c, ch), dtype=complex))
         sq, tmp, fcb, pcb, up = self._bufs
         single = Z.dtype != np.complex128  # complex64 spectra: products and sums in float64
-        runs = list(_group_runs(i0, n, self.n_groups))
+        runs = list(_group_runs(i0, n, self.n_groups, self.pair))
         fi, resp = self.fi, self.resp
         for a in range(0, self.F, ch):
             b = min(a + ch, self.F)
@@ -727,16 +744,28 @@ class _Accumulator:
             np.conjugate(z[:, fi], out=fc)
             p = pcb[:n, :, :m]
             np.multiply(z[:, resp], fc[:, None, :], out=p)
-            for j0, j1, g0 in runs:
-                g1 = g0 + j1 - j0
-                self.sff[g0:g1, a:b] += s[j0:j1, fi]
-                self.sxx[g0:g1, :, a:b] += s[j0:j1, resp]
-                self.sfx[g0:g1, :, a:b] += p[j0:j1]
+            if self.pair == 1:
+                for j0, j1, g0 in runs:
+                    g1 = g0 + j1 - j0
+                    self.sff[g0:g1, a:b] += s[j0:j1, fi]
+                    self.sxx[g0:g1, :, a:b] += s[j0:j1, resp]
+                    self.sfx[g0:g1, :, a:b] += p[j0:j1]
+                continue
+            for j0, j1, g0 in runs:  # one group per run: its hits summed here, then added once
+                for j in range(j0 + 1, j1):
+                    s[j0] += s[j]
+                    p[j0] += p[j]
+                self.sff[g0, a:b] += s[j0, fi]
+                self.sxx[g0, :, a:b] += s[j0, resp]
+                self.sfx[g0, :, a:b] += p[j0]
         for j0, j1, g0 in runs:
-            self.counts[g0:g0 + j1 - j0] += 1
+            if self.pair == 1:
+                self.counts[g0:g0 + j1 - j0] += 1
+            else:
+                self.counts[g0] += j1 - j0
 
     def group_sums(self) -> dict:
-        g = min(self.n_groups, self.n_hits)     # groups beyond n_hits never got a hit
+        g = min(self.n_groups, -(-self.n_hits // self.pair))  # the groups that got a hit
         return {
             "Sff": _readonly(self.sff[:g]),
             "Sxx": _readonly(self.sxx[:g].transpose(0, 2, 1)),
@@ -772,8 +801,8 @@ class _Buffers:
     the force.
     """
 
-    def __init__(self, n, c, dtype, force_index, n_groups, workers, touch=False):
-        self.key = (n, c, np.dtype(dtype), force_index, n_groups, workers)
+    def __init__(self, n, c, dtype, force_index, n_groups, workers, pair=1, touch=False):
+        self.key = (n, c, np.dtype(dtype), force_index, n_groups, workers, pair)
         self.n_first = max(1, min(_WINDOW_HITS, _WINDOW_BYTES // (8 * n * c)))
         self.block = _block_size(n, c)
         self.n_bufs = workers + 1 if workers > 1 else 1  # one being filled, one per helper, one queued
@@ -783,13 +812,13 @@ class _Buffers:
         else:  # the windows are chosen from float64 copies, then rounded into the buffers
             self.first = np.empty((self.n_first, c, n))
             self.space = np.empty((self.n_bufs * self.block, c, n), dtype=dtype)
-        self.acc = _Accumulator(n, c, force_index, n_groups, workers)
+        self.acc = _Accumulator(n, c, force_index, n_groups, workers, pair)
         if touch:
             for a in (self.space, self.first, self.acc.sff, self.acc.sxx, self.acc.sfx):
                 a.fill(0)
 
 
-def _early_buffers(expect, precision, force_index, n_groups, workers):
+def _early_buffers(expect, precision, force_index, n_groups, workers, pair=1):
     """:class:`_Buffers` for records of shape ``expect`` (n_samples, n_channels), made and
     touched by a thread of their own while the caller goes on; ``None`` when there is
     nothing to expect or no second thread. ``.result()`` waits for them."""
@@ -799,14 +828,15 @@ def _early_buffers(expect, precision, force_index, n_groups, workers):
 
     n, c = (int(v) for v in expect)
     pool = ThreadPoolExecutor(max_workers=1)
-    future = pool.submit(_Buffers, n, c, fft_dtype(precision), force_index, n_groups, workers, True)
+    future = pool.submit(_Buffers, n, c, fft_dtype(precision), force_index, n_groups, workers, pair,
+                         True)
     pool.shutdown(wait=False)  # the thread ends with the job
     return future
 
 
 def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windows,
                 n_groups: int, workers: int, force_offset: bool = False,
-                precision: str = "auto", expect=None) -> _Accumulator | None:
+                precision: str = "auto", expect=None, pair: int = 1) -> _Accumulator | None:
     """Window, FFT and accumulate all records, a few hits per FFT call.
 
     ``windows(first)`` gets the first (up to ``_WINDOW_HITS``) raw records as
@@ -833,13 +863,14 @@ def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windo
     rounded once into the block buffer. ``expect``: the (n_samples,
     n_channels) the records will have, if known: their memory is then made
     by another thread while the first record is pulled (for stored hits,
-    while the first pass reads the force of the hits).
+    while the first pass reads the force of the hits). ``pair``: hits per
+    group turn (see :data:`PAIR_HITS_PER_GROUP`).
     """
     from concurrent.futures import ThreadPoolExecutor
 
     import scipy.fft
 
-    early = _early_buffers(expect, precision, force_index, n_groups, workers)
+    early = _early_buffers(expect, precision, force_index, n_groups, workers, pair)
     source = iter(items)
     first = None  # the first records, (hits, C, n); in the block buffers when they fit
     k = 0
@@ -847,10 +878,10 @@ def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windo
         if first is None:
             n, c = record.shape
             dtype = fft_dtype(precision, record.dtype)
-            key = (n, c, np.dtype(dtype), force_index, n_groups, workers)
+            key = (n, c, np.dtype(dtype), force_index, n_groups, workers, pair)
             mem = early.result() if early is not None else None
             if mem is None or mem.key != key:
-                mem = _Buffers(n, c, dtype, force_index, n_groups, workers)
+                mem = _Buffers(n, c, dtype, force_index, n_groups, workers, pair)
             early = None
             n_first, block, n_bufs = mem.n_first, mem.block, mem.n_bufs
             space, first, acc = mem.space, mem.first, mem.acc
@@ -1425,14 +1456,16 @@ def compute_frf(
     dtype = fft_dtype(precision, getattr(run, "sample_dtype", np.float64))
     # stored hits have the run's n_samples (a continuous run's records have another length)
     expect = (int(run.n_samples), len(names)) if getattr(run, "layout", None) == "hits" else None
+    stored = int(getattr(run, "n_hits_stored", 0) or 0)
+    pair = 2 if stored >= PAIR_HITS_PER_GROUP * _check_groups(n_groups) else 1
     return _frf(accepted(), run.sample_rate_hz, run.force_index, names, estimator, window,
                 run.pretrigger_samples, str(run.name), n_groups, workers, len(names), rejected,
-                _precision_name(dtype), expect)
+                _precision_name(dtype), expect, pair)
 
 
 def _frf(items, sample_rate_hz, force_index, channel_names, estimator, window,
          pretrigger_samples, run, n_groups, workers, n_channels, rejected, precision,
-         expect=None) -> FrfSet:
+         expect=None, pair=1) -> FrfSet:
     _check_estimator(estimator)
     fft_dtype(precision)  # checked before any record is read
     n_groups = _check_groups(n_groups)
@@ -1456,7 +1489,7 @@ def _frf(items, sample_rate_hz, force_index, channel_names, estimator, window,
 
     items = _checked_force(_validated(items, run, n_channels), fi, run)
     acc = _run_blocks(items, fi, windows, n_groups, max(1, int(workers)), force_offset=True,
-                      precision=precision, expect=expect)
+                      precision=precision, expect=expect, pair=pair)
     if acc is None:
         reasons = ", ".join(f"{r} x{k}" for r, k in sorted(rejected.items()))
         detail = f" ({sum(rejected.values())} rejected: {reasons})" if rejected else ""

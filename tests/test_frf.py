@@ -743,3 +743,49 @@ def test_memory_made_early_for_another_shape_is_not_used():
         assert got.H.shape == (33, 1)
         np.testing.assert_array_equal(got.H, want.H)
         np.testing.assert_array_equal(got.group_sums["Sff"], want.group_sums["Sff"])
+
+
+def test_large_runs_put_two_consecutive_hits_in_each_group(tmp_path):
+    """A run of >= 4 G stored hits: hit i goes to group (i // 2) % G; each
+    group's sums are those of its hits, the FRF is that of all hits, and the
+    result is the same for any number of threads."""
+    from guidefit.frf import PAIR_HITS_PER_GROUP, WindowSettings
+    from guidefit.hits import iter_hits
+    from guidefit.recording import RunData, read_hit, read_recording, write_recording
+
+    rng = np.random.default_rng(8)
+    fs, n, G = 20_000.0, 512, 8
+    hits = PAIR_HITS_PER_GROUP * G + 3  # 35: 17 pairs and one hit alone
+    t = np.arange(n) / fs
+    records = np.zeros((hits, n, 2), dtype=np.float32)
+    for i in range(hits):
+        force = np.where((t >= 0.002) & (t < 0.0025), np.sin(np.pi * (t - 0.002) / 5e-4), 0.0)
+        records[i, :, 0] = (50 + i) * force + rng.normal(0, 0.05, n)
+        ring = np.where(t >= 0.002, np.exp(-400 * (t - 0.002)) * np.sin(2 * np.pi * 900 * (t - 0.002)), 0)
+        records[i, :, 1] = (1 + 0.02 * i) * ring + rng.normal(0, 0.01, n)
+    run = RunData("vertical", fs, [0, -1, 0], ["force", "acc_A_y"], ["N", "m/s^2"],
+                  [[0, 0, 0], [0.03, 0, 0.045]], [[0, -1, 0], [0, 1, 0]], data=records,
+                  layout="hits", pretrigger_samples=40)
+    write_recording(tmp_path / "many.h5", run)
+    stored = read_recording(tmp_path / "many.h5").runs[0]
+    paired = compute_frf(stored, iter_hits(stored), workers=1)
+    assert paired.group_sums["n_hits"].tolist() == [6, 5, 4, 4, 4, 4, 4, 4]
+    for workers in (2, 3):
+        again = compute_frf(stored, iter_hits(stored), workers=workers)
+        np.testing.assert_array_equal(again.H, paired.H)
+        for key in paired.group_sums:
+            np.testing.assert_array_equal(again.group_sums[key], paired.group_sums[key])
+    # each hit in a group of its own, with the same windows: the pairs' sums are theirs
+    plain = np.stack([read_hit(stored, i) for i in range(hits)])
+    window = WindowSettings(force_window_s=paired.force_window_s, force_taper_s=paired.force_taper_s,
+                            exp_tau_s=paired.exp_window_tau_s)
+    single = frf_from_records(plain, fs, window=window, pretrigger_samples=40, n_groups=hits,
+                              precision="single")
+    for key in ("Sff", "Sxx", "Sfx"):
+        per_hit = np.asarray(single.group_sums[key])
+        want = np.stack([per_hit[[i for i in range(hits) if (i // 2) % G == g]].sum(axis=0)
+                         for g in range(G)])
+        np.testing.assert_allclose(paired.group_sums[key], want, rtol=1e-12,
+                                   atol=1e-12 * np.abs(want).max())
+    np.testing.assert_allclose(paired.H, single.H, rtol=1e-10)
+    np.testing.assert_allclose(paired.coherence, single.coherence, rtol=1e-10, atol=1e-12)
