@@ -797,6 +797,16 @@ def test_fast_median_is_numpy_median():
         assert got == want and type(got) is type(want), (trial, n)
 
 
+def _stored_run(path, records, pretrigger_samples, units=("N", "m/s^2", "m/s^2")):
+    """A vertical hits-layout run of force, acc_A_y and acc_B_y written to ``path`` and read back."""
+    run = RunData("vertical", FS, [0, -1, 0], NAMES, list(units),
+                  [[0, 0, 0], [0.03, 0, 0.045], [-0.03, 0, 0.045]],
+                  [[0, -1, 0], [0, 1, 0], [0, 1, 0]], data=records, layout="hits",
+                  pretrigger_samples=pretrigger_samples)
+    write_recording(path, run)
+    return read_recording(path).runs[0]
+
+
 def test_stored_hits_in_g_read_once_as_stored_equal_read_hit(tmp_path, monkeypatch):
     """Stored hits are read as stored and converted to SI once (rows for the
     checks, data on demand): the same values, peaks and decisions as the plain
@@ -810,12 +820,7 @@ def test_stored_hits_in_g_read_once_as_stored_equal_read_hit(tmp_path, monkeypat
         records[i, :, 1] = (ringing(n, 200, 30.0) + rng.normal(0, 0.01, n)) / 9.80665
         records[i, :, 2] = ringing(n, 200, 20.0, f_hz=2100.0) + rng.normal(0, 0.01, n)
     records[4, 2500:2600, 0] += half_sine(100, 0, 40.0)  # a double hit
-    run = RunData("vertical", FS, [0, -1, 0], NAMES, ["N", "g", "m/s^2"],
-                  [[0, 0, 0], [0.03, 0, 0.045], [-0.03, 0, 0.045]],
-                  [[0, -1, 0], [0, 1, 0], [0, 1, 0]], data=records, layout="hits",
-                  pretrigger_samples=200)
-    write_recording(tmp_path / "g.h5", run)
-    stored = read_recording(tmp_path / "g.h5").runs[0]
+    stored = _stored_run(tmp_path / "g.h5", records, 200, units=("N", "g", "m/s^2"))
     assert stored.channels[1].scale_to_si == 9.80665
     want = _reference_stored_hits(stored, HitSettings(), n)
     assert [w[4] for w in want] == [(), (), (), (), ("double_hit",), ()]
@@ -837,12 +842,7 @@ def test_iter_hits_reuses_row_buffers_only_when_released(tmp_path):
         records[i, :, 0] = half_sine(2000, 100, 50.0 + i)
         records[i, :, 1] = ringing(2000, 100, 10.0 + i)
         records[i, :, 2] = ringing(2000, 100, 5.0 + i, f_hz=1800.0)
-    run = RunData("vertical", FS, [0, -1, 0], NAMES, ["N", "m/s^2", "m/s^2"],
-                  [[0, 0, 0], [0.03, 0, 0.045], [-0.03, 0, 0.045]],
-                  [[0, -1, 0], [0, 1, 0], [0, 1, 0]], data=records, layout="hits",
-                  pretrigger_samples=100)
-    write_recording(tmp_path / "keep.h5", run)
-    kept = list(iter_hits(read_recording(tmp_path / "keep.h5").runs[0]))
+    kept = list(iter_hits(_stored_run(tmp_path / "keep.h5", records, 100)))
     assert all(h.accepted for h in kept)
     for i, hit in enumerate(kept):
         np.testing.assert_array_equal(hit.data, records[i])
@@ -855,8 +855,6 @@ def test_first_pass_over_half_the_force_judges_as_the_full_median(tmp_path, monk
     decisions, reasons, peaks and metrics must be those of the full two-pass
     reference, for weak hits early, late and first, a non-finite force, and
     median-fraction limits that make none, some or most hits too weak."""
-    import dataclasses
-
     from guidefit.recording import RunReader
 
     rng = np.random.default_rng(17)
@@ -868,12 +866,7 @@ def test_first_pass_over_half_the_force_judges_as_the_full_median(tmp_path, monk
         records[i, :, 1] = ringing(n, 150, 0.3 * peaks[i]) + rng.normal(0, 0.01, n)
         records[i, :, 2] = ringing(n, 150, 0.2 * peaks[i], f_hz=2100.0) + rng.normal(0, 0.01, n)
     records[7, 1000, 0] = np.nan  # in the first pass's half: a peak from the finite samples
-    run = RunData("vertical", FS, [0, -1, 0], NAMES, ["N", "m/s^2", "m/s^2"],
-                  [[0, 0, 0], [0.03, 0, 0.045], [-0.03, 0, 0.045]],
-                  [[0, -1, 0], [0, 1, 0], [0, 1, 0]], data=records, layout="hits",
-                  pretrigger_samples=150)
-    write_recording(tmp_path / "weak.h5", run)
-    stored = read_recording(tmp_path / "weak.h5").runs[0]
+    stored = _stored_run(tmp_path / "weak.h5", records, 150)
     monkeypatch.setattr(hits_module, "_CACHE_BYTES", 0)
     monkeypatch.setattr(hits_module, "_READ_BYTES", 3 * 8 * n * 3)  # blocks of 3 hits
     read = []
@@ -897,8 +890,7 @@ def test_first_pass_over_half_the_force_judges_as_the_full_median(tmp_path, monk
     # a weak hit after strong ones (hit 2, before the first pass's half): the exact median mid-way
     swapped = records.copy()
     swapped[[0, 2]] = records[[2, 0]]
-    write_recording(tmp_path / "weak2.h5", dataclasses.replace(run, data=swapped))
-    stored = read_recording(tmp_path / "weak2.h5").runs[0]
+    stored = _stored_run(tmp_path / "weak2.h5", swapped, 150)
     for fraction in (0.05, 0.5):
         s = HitSettings(min_peak_fraction=fraction)
         want = _reference_stored_hits(stored, s, n)
