@@ -116,43 +116,30 @@ def w_floor64(path):
     return {"seconds": time.perf_counter() - t, "n_samples": int(np.prod(ds.shape)), "check": acc}
 
 
-def w_guidefit(path):
+def _guidefit(path, **options):
+    """``compute_frf(run, iter_hits(run), **options)`` on the file's first run, timed."""
     from guidefit.frf import compute_frf
     from guidefit.hits import iter_hits
     from guidefit.recording import read_recording
 
     t = time.perf_counter()
     run = read_recording(path).runs[0]
-    frf = compute_frf(run, iter_hits(run))
+    frf = compute_frf(run, iter_hits(run), **options)
     dt = time.perf_counter() - t
     return {"seconds": dt, "n_samples": run.n_hits_stored * run.n_samples * run.n_channels,
             "n_averages": frf.n_averages}
+
+
+def w_guidefit(path):
+    return _guidefit(path)
 
 
 def w_guidefit_double(path):
-    from guidefit.frf import compute_frf
-    from guidefit.hits import iter_hits
-    from guidefit.recording import read_recording
-
-    t = time.perf_counter()
-    run = read_recording(path).runs[0]
-    frf = compute_frf(run, iter_hits(run), precision="double")
-    dt = time.perf_counter() - t
-    return {"seconds": dt, "n_samples": run.n_hits_stored * run.n_samples * run.n_channels,
-            "n_averages": frf.n_averages}
+    return _guidefit(path, precision="double")
 
 
 def w_guidefit_one_thread(path):
-    from guidefit.frf import compute_frf
-    from guidefit.hits import iter_hits
-    from guidefit.recording import read_recording
-
-    t = time.perf_counter()
-    run = read_recording(path).runs[0]
-    frf = compute_frf(run, iter_hits(run), workers=1)
-    dt = time.perf_counter() - t
-    return {"seconds": dt, "n_samples": run.n_hits_stored * run.n_samples * run.n_channels,
-            "n_averages": frf.n_averages}
+    return _guidefit(path, workers=1)
 
 
 def w_guidefit_core(path):
