@@ -78,17 +78,19 @@ The FFT computes in the precision the samples were stored in
 ``complex64`` out) when the file stores ``float32`` (or ``float16``, or
 integers of at most 16 bits), else in double precision. Only the FFT is
 single: its spectra are converted to ``complex128`` before the products, the
-spectral sums are ``float64``, and so are H, coherence and everything after them. A float32 sample already carries a relative rounding error of
-up to :math:`2^{-24} \approx 6 \times 10^{-8}`; a float32 FFT of length
+spectral sums are ``float64``, and so are H, the coherence and everything
+after them. A float32 sample already carries a relative rounding error of up
+to :math:`2^{-24} \approx 6 \times 10^{-8}`; a float32 FFT of length
 :math:`n` adds an error of the same kind, about :math:`\sqrt{\log_2 n}` times
 larger (4x at n = 100 000): both lie some 130 dB below the record's RMS, far
 below the noise floor of any hammer-test chain (a 24-bit DAQ reaches about
--110 dB). Measured on simulated float32 recordings (``tests/test_frf_precision.py``,
-docs/frf.md, 8 seeds): single and double precision give identified frequencies
-and stiffnesses within 4e-9 relative, damping ratios and dampings within 2e-8,
-and FRFs that differ by a median 3e-5 (at most 2e-3) of their own random error. ``precision="double"``
-forces float64 FFTs (about 1.3x the FFT time); float64 files are always
-transformed in double precision. ``FrfSet.fft_precision`` says which was used.
+-110 dB). Measured on simulated float32 recordings
+(``tests/test_frf_precision.py``, docs/frf.md, 8 seeds): single and double
+precision give identified frequencies and stiffnesses within 4e-9 relative,
+damping ratios and dampings within 2e-8, and FRFs that differ by a median
+3e-5 (at most 2e-3) of their own random error. ``precision="double"`` forces
+float64 FFTs (about 1.3x the FFT time); float64 files are always transformed
+in double precision. ``FrfSet.fft_precision`` says which was used.
 
 References
 ----------
