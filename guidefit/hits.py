@@ -76,6 +76,7 @@ The reason string is ``"<code>: <detail>"``, several joined by ``"; "``;
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
@@ -910,11 +911,11 @@ def _force_peak(force: np.ndarray, pre: int | None):
     return None, None
 
 
-def _median_upper_bound(values, n_unknown: int) -> float | None:
-    """The largest ``np.median`` of ``values`` plus up to ``n_unknown`` more values
-    (each absent or anything): the median with ``n_unknown`` values of +inf.
-    ``inf`` when the unknown could decide it; None when there is no value at all."""
-    ordered = sorted(values)
+def _median_upper_bound(ordered, n_unknown: int) -> float | None:
+    """The largest ``np.median`` of the sorted values ``ordered`` plus up to
+    ``n_unknown`` more values (each absent or anything): the median with
+    ``n_unknown`` values of +inf. ``inf`` when the unknown could decide it;
+    None when there is no value at all."""
     n = len(ordered) + n_unknown
     if n == 0:
         return None
@@ -992,6 +993,7 @@ def _stored_hits(run: Run, s: HitSettings, length: int) -> Iterator[Hit]:
         force_pass(first_read, n_hits)
         exact = first_read == 0  # False: the median is only bounded so far
         median = exact_median() if exact else None
+        ordered = sorted(peaks.values())  # the known peaks, for the bound
         own = np.empty((1, length))  # the force of the hit being judged
         one = None if cache is not None else np.empty((1, length, n_channels), dtype=reader.dtype)
         spare: list[np.ndarray] = []  # rows of earlier hits, reused once nothing else holds them
@@ -1005,7 +1007,9 @@ def _stored_hits(run: Run, s: HitSettings, length: int) -> Iterator[Hit]:
                     peak, bases[i] = _force_peak(own[0], pre)
                     if peak is not None:
                         peaks[i] = peak
-                bound = _median_upper_bound(peaks.values(), max(0, first_read - i - 1))
+                        bisect.insort(ordered, peak)
+                unknown = first_read - i - 1  # hits whose force has not been read
+                bound = _median_upper_bound(ordered, unknown) if unknown > 0 else None
                 if bound is not None and math.isfinite(bound):
                     hit = _check_raw(run, raw, _rows_buffer(spare, (n_channels, length)), scale, s,
                                      i, pre, bound, bases[i])
@@ -1013,7 +1017,7 @@ def _stored_hits(run: Run, s: HitSettings, length: int) -> Iterator[Hit]:
                         yield hit
                         continue
                     del hit
-                force_pass(i + 1, first_read)  # the rest of the force: the exact median
+                force_pass(i + 1, first_read)  # the rest of the force (if any): the exact median
                 median, exact = exact_median(), True
             yield _check_raw(run, raw, _rows_buffer(spare, (n_channels, length)), scale, s, i,
                              pre, median, bases[i])

@@ -897,7 +897,7 @@ def test_first_pass_over_half_the_force_judges_as_the_full_median(tmp_path, monk
         assert "too_weak" not in want[0][4] and "too_weak" in want[2][4]
         _assert_same_hits([_as_tuple(h) for h in iter_hits(stored, s)], want)
     # the bound is an upper bound of np.median with unknown values absent or anything
-    values = [5.0, 1.0, 3.0]
+    values = [1.0, 3.0, 5.0]
     for extra in ([], [0.0], [10.0], [0.0, 0.0], [10.0, 10.0], [2.0, 4.0]):
         bound = hits_module._median_upper_bound(values, 2)
         assert float(np.median(values + extra)) <= bound
