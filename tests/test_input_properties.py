@@ -1,12 +1,17 @@
 """Property tests: whatever a file holds, the readers and identify raise guidefit's own errors only."""
 
+import contextlib
+import os
 import shutil
+import sys
 import tempfile
+import time
 import warnings
 from pathlib import Path
 
 import h5py
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -83,11 +88,25 @@ def test_any_attribute_value_gives_own_error(where, value):
         _consume(path)
 
 
+@contextlib.contextmanager
+def _hdf5_timeout(seconds):
+    """Give the HDF5 library ``seconds`` to read a file's metadata (guidefit.recording)."""
+    old = os.environ.get("GUIDEFIT_HDF5_TIMEOUT_S")
+    os.environ["GUIDEFIT_HDF5_TIMEOUT_S"] = str(seconds)
+    try:
+        yield
+    finally:
+        if old is None:
+            del os.environ["GUIDEFIT_HDF5_TIMEOUT_S"]
+        else:
+            os.environ["GUIDEFIT_HDF5_TIMEOUT_S"] = old
+
+
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(offsets=st.lists(st.integers(0, 10**6), min_size=1, max_size=20), byte=st.integers(0, 255),
        cut=st.none() | st.floats(0.05, 0.99))
 def test_corrupted_bytes_give_own_error(offsets, byte, cut):
-    with tempfile.TemporaryDirectory() as folder:
+    with tempfile.TemporaryDirectory() as folder, _hdf5_timeout(5):
         path = Path(folder) / "rec.h5"
         _small_recording(path)
         data = bytearray(path.read_bytes())
@@ -124,3 +143,23 @@ def test_sample_survives_a_copy_with_other_suffix(tmp_path):
         assert "really_h5.csv" in str(exc)
     else:
         raise AssertionError("an HDF5 file read as CSV must be refused")
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the guard forks (Linux)")
+def test_metadata_the_hdf5_library_cannot_finish_reading_is_a_damaged_file(tmp_path):
+    """One byte of 0xff in the global heap that holds the root attributes makes
+    libhdf5 2.0 loop (holding the GIL) when it reads them: guidefit must give
+    up after its timeout with one RecordingError line, not hang. (With another
+    HDF5 the same byte may give an ordinary error: also a RecordingError.)"""
+    from guidefit.errors import RecordingError
+
+    path = tmp_path / "rec.h5"
+    _small_recording(path)
+    data = bytearray(path.read_bytes())
+    data[2056] = 0xFF
+    path.write_bytes(bytes(data))
+    start = time.monotonic()
+    with _hdf5_timeout(2), pytest.raises(RecordingError) as info:
+        read_recording(path)
+    assert time.monotonic() - start < 15
+    assert "\n" not in str(info.value) and "damaged HDF5 file" in str(info.value)
