@@ -88,6 +88,10 @@ def main():
     # workers. An explicit setting in the environment wins.
     for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ.setdefault(name, "1")
+    # A damaged HDF5 file can make the HDF5 library loop for good while it reads the metadata:
+    # the command line reads it in a forked child it gives up on after 30 s (exit 2, one line).
+    # The library does not fork unless asked (fork is unsafe in a program with other threads).
+    os.environ.setdefault("GUIDEFIT_HDF5_TIMEOUT_S", "30")
 
 
 def _parse_load(text: str | None):

@@ -1021,8 +1021,11 @@ def _is_text(head: bytes) -> bool:
 
 
 #: Seconds the HDF5 library may take to read a recording's metadata (attributes, groups,
-#: a probe of the samples) before the file counts as damaged; env GUIDEFIT_HDF5_TIMEOUT_S.
-HDF5_METADATA_TIMEOUT_S = 30.0
+#: a probe of the samples) before the file counts as damaged; env GUIDEFIT_HDF5_TIMEOUT_S
+#: wins. 0: no guard, the metadata is read in this process. The command line sets 30 s;
+#: the library default is 0, because the guard forks, and a fork is unsafe in a program
+#: whose other threads may hold locks (the child would wait on them for good).
+HDF5_METADATA_TIMEOUT_S = 0.0
 
 
 def _read_hdf5(p: Path, display: str) -> Recording:
@@ -1030,14 +1033,16 @@ def _read_hdf5(p: Path, display: str) -> Recording:
 
     Some damaged files make the HDF5 library itself loop (a corrupted global
     heap: minutes or forever, holding the GIL, so no Python thread can stop
-    it) or allocate gigabytes. Where the platform can fork (Linux), the
-    metadata is therefore read in a forked child that the parent gives up on
-    after ``HDF5_METADATA_TIMEOUT_S`` seconds, or when it dies, with one
+    it) or allocate gigabytes. With a timeout set (``HDF5_METADATA_TIMEOUT_S``
+    or ``GUIDEFIT_HDF5_TIMEOUT_S``; the command line sets 30 s) and where the
+    platform can fork (Linux), the metadata is read in a forked child that
+    the parent gives up on after the timeout, or when it dies, with one
     RecordingError. The fork costs about 30 ms per file on the development
     machine (42 against 8 ms for the sample recording).
     """
-    if sys.platform.startswith("linux") and hasattr(os, "fork"):
-        return _in_child(_read_hdf5_checked, p, display)
+    timeout = float(os.environ.get("GUIDEFIT_HDF5_TIMEOUT_S", HDF5_METADATA_TIMEOUT_S))
+    if timeout > 0 and sys.platform.startswith("linux") and hasattr(os, "fork"):
+        return _in_child(_read_hdf5_checked, p, display, timeout)
     return _read_hdf5_checked(p, display)
 
 
@@ -1071,14 +1076,13 @@ def _reap(wait: bool, pid: int | None = None) -> int:
     return status_of_pid
 
 
-def _in_child(function, p: Path, display: str):
+def _in_child(function, p: Path, display: str, timeout: float):
     """``function(p, display)`` in a forked child, its result or GuidefitError returned
     or raised here; a child that does not answer in time, or dies, is a RecordingError."""
     import pickle
     import select
     import signal
 
-    timeout = float(os.environ.get("GUIDEFIT_HDF5_TIMEOUT_S", HDF5_METADATA_TIMEOUT_S))
     _reap(wait=False)
     read_end, write_end = os.pipe()
     pid = os.fork()

@@ -163,3 +163,21 @@ def test_metadata_the_hdf5_library_cannot_finish_reading_is_a_damaged_file(tmp_p
         read_recording(path)
     assert time.monotonic() - start < 15
     assert "\n" not in str(info.value) and "damaged HDF5 file" in str(info.value)
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the guard forks (Linux)")
+def test_command_line_gives_up_on_metadata_hdf5_cannot_read(tmp_path):
+    """The command line guards the metadata read by default: exit 2, one line."""
+    import subprocess
+
+    path = tmp_path / "rec.h5"
+    _small_recording(path)
+    data = bytearray(path.read_bytes())
+    data[2056] = 0xFF
+    path.write_bytes(bytes(data))
+    env = {**os.environ, "GUIDEFIT_HDF5_TIMEOUT_S": "2"}
+    done = subprocess.run([sys.executable, "-m", "guidefit", "identify", str(path)], env=env,
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and "damaged HDF5 file" in lines[0]
