@@ -85,7 +85,7 @@ from types import MappingProxyType
 import numpy as np
 
 from guidefit.errors import GuidefitError
-from guidefit.recording import Run, open_reader, read_block, read_hit  # noqa: F401
+from guidefit.io.records import Run, open_reader, read_block, read_hit  # noqa: F401
 
 __all__ = [
     "CHUNK_SAMPLES",

@@ -1,0 +1,456 @@
+"""The recording contract in CSV (``.csv``): one ``signals`` run per file.
+
+``#``-lines of ``key: value`` metadata (``format``, ``run``,
+``sample_rate_hz``, ``excitation_direction``, ``units``, ``positions_m``,
+...), then a header row of channel names (an optional first column
+``time``), then one row of numbers per sample, ``,`` between fields and
+``.`` as the decimal mark (``shared/recording-format.md``). Missing
+positions and directions come from the guide's default points
+(:mod:`guidefit.io.geometry`). The samples are held in memory as float64
+(:class:`~guidefit.io.records.ArraySource`).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from pathlib import Path
+
+import numpy as np
+
+from guidefit.errors import GuidefitError, RecordingError
+from guidefit.io._checks import (
+    _atomic,
+    _check_pretrigger,
+    _check_sample_rate,
+    _check_vector,
+    _first_line,
+    _frozen_array,
+    _valid_run_name,
+)
+from guidefit.io.geometry import _ACC_RE, default_channel_geometry
+from guidefit.io.records import (
+    FORMAT_NAME,
+    FORMAT_VERSION,
+    ArraySource,
+    Recording,
+    RecordingData,
+    Run,
+    RunData,
+    _build_channels,
+)
+from guidefit.io.registry import FileFormat
+
+__all__ = ["read_csv", "write_csv"]
+
+SUFFIXES = (".csv",)
+
+
+_NUMBER_RE = re.compile(
+    r"^[+-]?((\d+\.?\d*|\.\d+)([eE][+-]?\d+)?|nan|inf|infinity)$", re.IGNORECASE
+)
+_DECIMAL_COMMA_RE = re.compile(r"^[+-]?\d+,\d+([eE][+-]?\d+)?$")
+_CSV_KEYS = (
+    "format",
+    "format_version",
+    "guide",
+    "description",
+    "run",
+    "sample_rate_hz",
+    "excitation_direction",
+    "excitation_position_m",
+    "units",
+    "positions_m",
+    "directions",
+    "pretrigger_samples",
+)
+
+
+def read_csv(p: Path, display: str) -> Recording:
+    """Read and validate a contract CSV recording (``display``: the path as given)."""
+    raw = p.read_bytes()
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise RecordingError(
+            f"{display}: not UTF-8 text (byte {exc.start}); expected a CSV text file"
+        ) from None
+    if "\x00" in text:
+        raise RecordingError(
+            f"{display}: contains NUL bytes; expected a CSV text file (is it HDF5? use .h5)"
+        )
+    lines = text.splitlines()
+    meta: dict[str, tuple[str, int]] = {}
+    i = 0
+    while i < len(lines):
+        stripped = lines[i].strip()
+        if not stripped:
+            i += 1
+            continue
+        if not stripped.startswith("#"):
+            break
+        body = stripped[1:].strip()
+        if ":" in body:
+            key, value = body.split(":", 1)
+            key = key.strip().lower()
+            if key in _CSV_KEYS:
+                if key in meta and meta[key][0] != value.strip():
+                    raise RecordingError(
+                        f"{display}: line {i + 1} '{key}': given again as '{_clip(value.strip())}' (line {meta[key][1]}: "
+                        f"'{_clip(meta[key][0])}'); expected each key once"
+                    )
+                meta.setdefault(key, (value.strip(), i + 1))
+        i += 1
+    if i >= len(lines):
+        raise RecordingError(
+            f"{display}: no header row; expected a line of channel names such as 'time,force,acc_A_y'"
+        )
+    header_no = i + 1
+    names, has_time = _csv_header(lines[i], header_no, display)
+    data_lines = lines[i + 1 :]
+    if not any(line.strip() for line in data_lines):
+        raise RecordingError(f"{display}: no data rows after the header (line {header_no})")
+    table = _csv_numbers(data_lines, header_no + 1, names, display)
+
+    def line_of(key):
+        return f"{display}: line {meta[key][1]} '{key}'"
+
+    if "format" in meta and meta["format"][0] != FORMAT_NAME:
+        raise RecordingError(
+            f"{line_of('format')}: '{meta['format'][0]}'; expected '{FORMAT_NAME}'"
+        )
+    if "format_version" in meta:
+        value = meta["format_version"][0]
+        if value.strip() != str(FORMAT_VERSION):
+            raise RecordingError(
+                f"{line_of('format_version')}: '{value}' is not supported; this guidefit reads version {FORMAT_VERSION}"
+            )
+    guide = meta.get("guide", ("", 0))[0] or None
+    description = meta.get("description", ("", 0))[0]
+    run_name = meta.get("run", ("", 0))[0] or p.stem
+    if not _valid_run_name(run_name):
+        raise RecordingError(
+            f"{display}: run name '{run_name}' not allowed; expected text without '/'"
+        )
+
+    rate = None
+    if "sample_rate_hz" in meta:
+        rate = _check_sample_rate(
+            _csv_float(meta["sample_rate_hz"][0], line_of("sample_rate_hz")),
+            line_of("sample_rate_hz"),
+        )
+    if has_time:
+        rate = _csv_time_rate(table[:, 0], rate, display)
+        table = table[:, 1:]
+        names = names[1:]
+    elif rate is None:
+        raise RecordingError(
+            f"{display}: sample rate unknown; expected a '# sample_rate_hz: ...' line or a first column 'time'"
+        )
+    if not names:
+        raise RecordingError(
+            f"{display}: no channels besides 'time'; expected 'force' and accelerations"
+        )
+    if "excitation_direction" not in meta:
+        raise RecordingError(
+            f"{display}: excitation_direction missing; expected a line such as '# excitation_direction: 0 -1 0'"
+        )
+    exc_dir = _check_vector(
+        _csv_floats(*meta["excitation_direction"], display, "excitation_direction"),
+        line_of("excitation_direction"),
+        "excitation_direction",
+        True,
+    )
+    exc_pos = None
+    if "excitation_position_m" in meta:
+        exc_pos = _check_vector(
+            _csv_floats(*meta["excitation_position_m"], display, "excitation_position_m"),
+            line_of("excitation_position_m"),
+            "excitation_position_m",
+            False,
+        )
+    n = len(names)
+    if "units" in meta:
+        units = [u for u in re.split(r"[\s,;]+", meta["units"][0]) if u]
+        if has_time and len(units) == n + 1:
+            if units[0] != "s":
+                raise RecordingError(
+                    f"{line_of('units')}: unit of 'time' is '{units[0]}'; expected 's'"
+                )
+            units = units[1:]
+        if len(units) != n:
+            raise RecordingError(
+                f"{line_of('units')}: {len(units)} units for {n} channels ({', '.join(names)})"
+            )
+    else:
+        units = ["N" if name == "force" else "m/s^2" for name in names]
+
+    # names and units first, so their errors win over a missing default point
+    placeholder = np.tile([1.0, 0.0, 0.0], (n, 1))
+    _build_channels(display, tuple(names), tuple(units), placeholder, placeholder)
+    if "positions_m" in meta:
+        positions = _csv_floats(*meta["positions_m"], display, "positions_m", 3 * n).reshape(n, 3)
+        known = {m.group(1): (0.0, 0.0, 0.0) for m in map(_ACC_RE.match, names) if m}
+    else:
+        positions = known = None
+    try:  # `known` stands in for the guide's points when the positions are given
+        default_pos, default_dir = default_channel_geometry(
+            names, exc_dir, exc_pos, guide=guide, points=known
+        )
+    except GuidefitError as exc:
+        raise RecordingError(f"{display}: {exc}") from None
+    if positions is None:
+        positions = default_pos
+    if "directions" in meta:
+        directions = _csv_floats(*meta["directions"], display, "directions", 3 * n).reshape(n, 3)
+    else:
+        directions = default_dir
+    channels, force_index = _build_channels(
+        display, tuple(names), tuple(units), positions, directions
+    )
+    pretrigger = None
+    if "pretrigger_samples" in meta:
+        value = _csv_float(meta["pretrigger_samples"][0], line_of("pretrigger_samples"))
+        pretrigger = _check_pretrigger(value, table.shape[0], line_of("pretrigger_samples"))
+    data = np.ascontiguousarray(table)
+    data.setflags(write=False)
+    run = Run(
+        name=run_name,
+        sample_rate_hz=rate,
+        excitation_direction=_frozen_array(exc_dir),
+        excitation_position_m=None if exc_pos is None else _frozen_array(exc_pos),
+        channels=channels,
+        layout="signals",
+        n_samples=int(data.shape[0]),
+        n_hits_stored=0,
+        pretrigger_samples=pretrigger,
+        source=ArraySource(data),
+        force_index=force_index,
+        file=display,
+    )
+    return Recording(path=display, guide=guide, description=description, runs=(run,))
+
+
+def _csv_header(line: str, line_no: int, display: str) -> tuple[list[str], bool]:
+    where = f"{display}: line {line_no} (header)"
+    if ";" in line:
+        raise RecordingError(
+            f"{where}: fields separated by ';'; expected ',' between fields and '.' as decimal mark"
+        )
+    fields_ = [f.strip().strip('"').strip("'").strip() for f in line.split(",")]
+    if len(fields_) == 1 and "\t" in line:
+        raise RecordingError(f"{where}: fields separated by tabs; expected ',' between fields")
+    if _NUMBER_RE.match(fields_[0]) or _DECIMAL_COMMA_RE.match(fields_[0]):
+        raise RecordingError(
+            f"{where}: starts with a number; expected a header row of channel names such as 'time,force,acc_A_y'"
+        )
+    if len(fields_) == 1 and len(line.split()) > 1:
+        raise RecordingError(f"{where}: fields separated by spaces; expected ',' between fields")
+    for k, name in enumerate(fields_):
+        if not name:
+            raise RecordingError(f"{where}: column {k + 1} has no name; expected a channel name")
+    has_time = fields_[0].lower() == "time"
+    if has_time:
+        fields_[0] = "time"
+    return fields_, has_time
+
+
+def _csv_numbers(
+    data_lines: list[str], first_no: int, names: list[str], display: str
+) -> np.ndarray:
+    """Parse the data rows; on any problem, find the first bad line and name it."""
+    n = len(names)
+    try:
+        table = np.loadtxt(data_lines, delimiter=",", comments=None, dtype=np.float64, ndmin=2)
+    except ValueError as exc:
+        raise _csv_locate_error(data_lines, first_no, names, display, exc) from None
+    if table.shape[1] != n:
+        raise _csv_locate_error(data_lines, first_no, names, display, None)
+    return table
+
+
+def _csv_locate_error(data_lines, first_no, names, display, exc) -> RecordingError:
+    n = len(names)
+    comma_hint = "decimal commas? guidefit expects '.' as the decimal mark and ',' between fields"
+    for k, line in enumerate(data_lines):
+        stripped = line.strip()
+        if not stripped:
+            continue
+        no = first_no + k
+        where = f"{display}: line {no}"
+        if stripped.startswith("#"):
+            return RecordingError(
+                f"{where}: '#' line after the header; metadata lines must come before the header"
+            )
+        if ";" in stripped:
+            return RecordingError(
+                f"{where}: fields separated by ';'; expected ',' between fields and '.' as decimal mark"
+            )
+        tokens = [t.strip() for t in line.split(",")]
+        if len(tokens) != n:
+            hint = (
+                comma_hint
+                if len(tokens) > n and re.search(r"\d,\d", line)
+                else "expected one value per column"
+            )
+            return RecordingError(f"{where}: {len(tokens)} fields, header has {n} ({hint})")
+        for name, token in zip(names, tokens):
+            cwhere = f"{where}, column '{name}'"
+            if not token:
+                return RecordingError(
+                    f"{cwhere}: missing value; expected a number (write 'nan' for a bad sample)"
+                )
+            if not _NUMBER_RE.match(token):
+                return RecordingError(f"{cwhere}: '{_clip(token)}' is not a number")
+    detail = _first_line(exc) if exc is not None else "unexpected table shape"
+    return RecordingError(f"{display}: cannot read the data rows ({detail})")
+
+
+def _clip(text: str, width: int = 30) -> str:
+    return text if len(text) <= width else text[: width - 3] + "..."
+
+
+def _csv_float(value: str, where: str) -> float:
+    token = value.strip()
+    if _NUMBER_RE.match(token):
+        return float(token)
+    if _DECIMAL_COMMA_RE.match(token):
+        raise RecordingError(
+            f"{where}: '{token}' has a decimal comma; expected '.' as the decimal mark"
+        )
+    raise RecordingError(f"{where}: '{_clip(token)}' is not a number")
+
+
+def _csv_floats(value: str, line_no: int, display: str, key: str, count: int = 3) -> np.ndarray:
+    where = f"{display}: line {line_no} '{key}'"
+    tokens = [t for t in re.split(r"[\s,;]+", value.strip().strip("[]()")) if t]
+    bad = [t for t in tokens if not _NUMBER_RE.match(t)]
+    if bad:
+        raise RecordingError(
+            f"{where}: '{_clip(bad[0])}' is not a number; expected {count} numbers"
+        )
+    if len(tokens) != count:
+        hint = " (decimal commas? use '.')" if "," in value else ""
+        raise RecordingError(f"{where}: {len(tokens)} numbers; expected {count}{hint}")
+    return np.array([float(t) for t in tokens])
+
+
+def _csv_time_rate(time: np.ndarray, rate: float | None, display: str) -> float:
+    where = f"{display}: column 'time'"
+    if not np.all(np.isfinite(time)):
+        raise RecordingError(f"{where}: holds non-finite values; expected times in seconds")
+    if time.size < 2:
+        if rate is None:
+            raise RecordingError(
+                f"{where}: one row cannot give a sample rate; add '# sample_rate_hz: ...'"
+            )
+        return rate
+    steps = np.diff(time)
+    if np.any(steps <= 0):
+        row = int(np.flatnonzero(steps <= 0)[0]) + 1
+        raise RecordingError(
+            f"{where}: not increasing at data row {row + 1}; expected equally spaced times"
+        )
+    k = np.arange(time.size, dtype=np.float64)
+    kc = k - k.mean()
+    tc = time - time.mean()
+    fs = float(np.dot(kc, kc) / np.dot(kc, tc))  # least-squares slope of k over t
+    deviation = float(np.max(np.abs(tc - kc / fs))) * fs
+    if deviation > 0.1:
+        raise RecordingError(
+            f"{where}: spacing not uniform (a sample is {deviation:.2g} sample periods off); expected a constant sample rate"
+        )
+    if rate is None:
+        return fs
+    deviation = float(np.max(np.abs(time - time[0] - k / rate))) * rate
+    if deviation > 0.5:
+        raise RecordingError(
+            f"{where}: spacing gives {fs:.6g} Hz but sample_rate_hz says {rate:.6g} Hz; expected them to agree"
+        )
+    return rate
+
+
+# ---------------------------------------------------------------------- writing
+
+
+def write_csv(path, recording, *, compression: str | None = None) -> None:
+    """Write one ``signals`` run as contract CSV with a ``time`` column, atomically.
+
+    ``compression`` is accepted for the common writer signature and ignored.
+    See :func:`guidefit.io.write_recording`.
+    """
+    display = os.fspath(path)
+    if isinstance(recording, RunData):
+        recording = RecordingData((recording,))
+    if isinstance(recording, Recording):
+        recording = recording.to_data()
+    if not isinstance(recording, RecordingData):
+        raise TypeError(
+            f"recording: expected RecordingData, RunData or Recording, got {type(recording).__name__}"
+        )
+    _atomic(Path(display), lambda tmp: _write_csv(tmp, display, recording))
+
+
+def _write_csv(tmp: Path, display: str, recording: RecordingData) -> None:
+    if len(recording.runs) != 1:
+        raise RecordingError(
+            f"{display}: a CSV file holds one run, the recording has {len(recording.runs)}; write .h5 or one CSV per run"
+        )
+    run = recording.runs[0]
+    if run.layout != "signals":
+        raise RecordingError(
+            f"{display}: run '{run.name}': CSV holds one continuous record; write 'hits' runs to .h5"
+        )
+    if run.data is None or run.data.shape[0] == 0:
+        raise RecordingError(f"{display}: run '{run.name}': no samples to write")
+    for key, value in (("guide", recording.guide or ""), ("description", recording.description)):
+        if "\n" in value or "\r" in value:
+            raise RecordingError(
+                f"{display}: {key} contains a line break; CSV metadata is one line each"
+            )
+
+    def vec(v) -> str:
+        return " ".join(repr(float(x)) for x in np.asarray(v).reshape(-1))
+
+    lines = [f"# format: {FORMAT_NAME}", f"# format_version: {FORMAT_VERSION}"]
+    if recording.guide:
+        lines.append(f"# guide: {recording.guide}")
+    if recording.description:
+        lines.append(f"# description: {recording.description}")
+    lines.append(f"# run: {run.name}")
+    lines.append(f"# sample_rate_hz: {run.sample_rate_hz!r}")
+    lines.append(f"# excitation_direction: {vec(run.excitation_direction)}")
+    if run.excitation_position_m is not None:
+        lines.append(f"# excitation_position_m: {vec(run.excitation_position_m)}")
+    lines.append(f"# units: {' '.join(run.units)}")
+    lines.append("# positions_m: " + "; ".join(vec(row) for row in run.positions_m))
+    lines.append("# directions: " + "; ".join(vec(row) for row in run.directions))
+    if run.pretrigger_samples is not None:
+        lines.append(f"# pretrigger_samples: {run.pretrigger_samples}")
+    lines.append(",".join(("time",) + run.channel_names))
+    data = np.asarray(run.data, dtype=np.float64)
+    time = np.arange(data.shape[0]) / run.sample_rate_hz
+    try:
+        with open(tmp, "w", encoding="utf-8", newline="\n") as fh:
+            fh.write("\n".join(lines) + "\n")
+            np.savetxt(
+                fh,
+                np.column_stack([time, data]),
+                delimiter=",",
+                fmt=["%.10g"] + ["%.17g"] * data.shape[1],
+            )
+    except OSError as exc:
+        raise RecordingError(f"{display}: cannot write ({_first_line(exc)})") from None
+
+
+
+FORMATS = (
+    FileFormat(
+        name="guidefit recording, CSV",
+        suffixes=SUFFIXES,
+        kind="recording",
+        read=read_csv,
+        write=write_csv,
+        streaming=False,
+    ),
+)

@@ -1,0 +1,1052 @@
+r"""Universal File Format (UFF) dataset 58 interchange: FRFs and time data.
+
+UFF dataset 58 ("function at nodal DOF") is the file most modal-analysis
+software reads and writes (ME'scope, Simcenter Testlab, I-DEAS, sdypy-EMA).
+One dataset holds one function of one response DOF (node and direction)
+against one reference DOF. This module writes guidefit's FRFs and coherences
+(:func:`write_frf_uff`) and time recordings (:func:`write_uff_recording`) as
+ASCII UFF-58, and reads UFF-58 time data as a :class:`~guidefit.io.records.Recording`
+(:func:`read_uff_recording`; :func:`guidefit.io.read_recording` calls
+it for ``.uff`` and ``.unv`` files). It uses the optional package ``pyuff``
+(``pip install 'guidefit[uff]'``), imported only when a UFF file is touched.
+
+Numbering
+---------
+UFF-58 knows nodes and the six directions +-X, +-Y, +-Z (codes +-1, +-2, +-3;
+rotations +-4..+-6 are not used here). guidefit numbers them so that the same
+measuring point has the same node in every run and every file:
+
+* response node of point A, B, C, D: 1, 2, 3, 4 (:data:`POINT_NODES`); any
+  other point name: 10 + k, where k counts the other names (1, 2, ...) in the
+  order they first appear in the file (:func:`point_nodes`);
+* reference node (the hammer) of the i-th run (i = 1, 2, ...): 100 + i;
+* direction: the channel's axis letter, x = 1, y = 2, z = 3, negative when the
+  sensor's positive axis points along the negative carriage axis
+  (:func:`direction_code`); the reference direction is the run's excitation
+  direction in the same code. Directions must lie along an axis (within
+  :data:`DIRECTION_TOLERANCE`).
+
+Fields written
+--------------
+Every file starts with a units dataset 164 (SI: metre, newton, factors 1).
+Then one dataset 58 per function, ASCII, double precision (each value in
+E20.12 with 12 significant digits; the abscissa minimum and increment in
+E13.5, 6 significant digits):
+
+===================  ==========================  ===========================  ======================
+field                FRF                         coherence                    time data
+===================  ==========================  ===========================  ======================
+function type        4 (FRF)                     6 (coherence)                1 (time response)
+ordinate data type   6 (complex double)          4 (real double)              4 (real double)
+abscissa             18 frequency, ``Hz``        18 frequency, ``Hz``         17 time, ``s``
+ordinate numerator   12 acceleration, ``m/s^2``  1 general, dimensionless     12 acc. ``m/s^2`` or 13 force ``N``
+ordinate denominator 13 force, ``N``             0 (unused)                   0 (unused)
+===================  ==========================  ===========================  ======================
+
+ID lines: 1 the function (``H1 acc_A_y/force``, ``coherence acc_A_y/force``,
+``acc_A_y``, ``force``), 2 the run name, 3 and 4 ``NONE``, 5 provenance
+``guidefit key=value ...`` (estimator and averages of an FRF; the exact
+``sample_rate_hz`` of time data, which the E13.5 increment cannot carry, and
+the ``guide``). Entity names are ``NONE``. The format has no NaN: an
+undefined value (e.g. the coherence where no force was measured) is written
+as 0.
+
+Reading time data
+-----------------
+:func:`read_uff_recording` reads the datasets 58 of function type 1 and
+ignores the others (geometry, FRFs, ...). One run per reference DOF (node
+and direction), in the order they first appear. In a run, the force channel
+is the record whose ordinate is excitation force (specific data type 13),
+or, if none is, the record at the reference DOF itself; every other record
+must be an acceleration (type 12) and becomes ``acc_<point>_<axis>``: point
+A-D for nodes 1-4, ``N<node>`` otherwise (``acc_N12_z``), the axis from the
+direction code. A file written by guidefit (ID line 5 starts with
+``guidefit``) keeps its run and channel names, its exact sample rate and its
+guide. Positions, which UFF-58 does not carry: the guide's default point for
+A-D (:func:`guidefit.io.geometry.default_points`; MRB35 when the file names no
+guide), the origin for any other point and for the force; the excitation
+position is unknown (None). Sample rate: the reciprocal of the abscissa
+increment, or the whole number of Hz whose reciprocal the 6-digit increment
+shows (51200 for ``1.95312e-05``), or guidefit's exact rate. Layout
+``signals``: one continuous record per run, in which :mod:`guidefit.hits`
+finds the hits. Units: SI (a dataset 164 with other factors is refused);
+an acceleration with units label ``g`` is kept in g.
+
+pyuff's sharp edges, handled here: its binary writer in overwrite mode
+leaves a 7-byte file, and its ASCII writer appends to an existing file, so
+files are written as ASCII to ``<path>.part`` (removed first) and moved over
+``path`` at the end; ``read_sets`` returns a dict for one set and a list for
+several; ``prepare_58`` wants a denominator type even for time data; it
+reads a truncated last dataset silently (counted here) and does not check
+the number of values against the header (checked here).
+
+References
+----------
+.. [1] Structural Dynamics Research Lab, University of Cincinnati, "Universal
+   File Format: dataset 58, function at nodal DOF; dataset 164, units".
+.. [2] pyuff, https://pypi.org/project/pyuff/ (GPL-3.0; used as a library).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import re
+from collections.abc import Iterable
+from pathlib import Path
+
+import numpy as np
+
+from guidefit.errors import GuidefitError, RecordingError
+from guidefit.io.geometry import default_points
+from guidefit.io.records import (
+    ACCELERATION_UNITS,
+    FORCE_UNITS,
+    ArraySource,
+    Recording,
+    RecordingData,
+    Run,
+    RunData,
+)
+from guidefit.io.registry import FileFormat
+
+__all__ = [
+    "DIRECTION_TOLERANCE",
+    "FUNCTION_COHERENCE",
+    "FUNCTION_FRF",
+    "FUNCTION_TIME",
+    "OTHER_POINT_NODE_BASE",
+    "POINT_NODES",
+    "REFERENCE_NODE_BASE",
+    "SPEC_ACCELERATION",
+    "SPEC_FORCE",
+    "SPEC_FREQUENCY",
+    "SPEC_GENERAL",
+    "SPEC_TIME",
+    "UFF_SUFFIXES",
+    "direction_code",
+    "direction_vector",
+    "point_nodes",
+    "read_uff_recording",
+    "write_frf_uff",
+    "write_uff_recording",
+]
+
+UFF_SUFFIXES = (".uff", ".unv")
+
+FUNCTION_TIME = 1
+"""UFF-58 function type of a time response."""
+FUNCTION_FRF = 4
+"""UFF-58 function type of a frequency response function."""
+FUNCTION_COHERENCE = 6
+"""UFF-58 function type of an (ordinary) coherence."""
+
+SPEC_UNKNOWN = 0
+SPEC_GENERAL = 1
+SPEC_ACCELERATION = 12
+SPEC_FORCE = 13
+SPEC_TIME = 17
+SPEC_FREQUENCY = 18
+
+POINT_NODES = {"A": 1, "B": 2, "C": 3, "D": 4}
+"""Response node of the paper's measuring points A-D."""
+OTHER_POINT_NODE_BASE = 10
+"""Node of the k-th other point name (k = 1, 2, ...) is this + k."""
+REFERENCE_NODE_BASE = 100
+"""Reference (hammer) node of the i-th run (i = 1, 2, ...) is this + i."""
+DIRECTION_TOLERANCE = 1e-3
+"""A direction is along axis k when its k-component is within this of +-1."""
+
+_AXIS_CODES = {"x": 1, "y": 2, "z": 3}
+_DIRECTION_LABELS = {1: "X", 2: "Y", 3: "Z"}
+_FUNCTION_NAMES = {
+    0: "general",
+    1: "time response",
+    2: "auto spectrum",
+    3: "cross spectrum",
+    4: "FRF",
+    5: "transmissibility",
+    6: "coherence",
+    9: "PSD",
+    12: "spectrum",
+}
+_SPEC_NAMES = {
+    0: "unknown",
+    1: "general",
+    2: "stress",
+    3: "strain",
+    5: "temperature",
+    6: "heat flux",
+    8: "displacement",
+    9: "reaction force",
+    11: "velocity",
+    12: "acceleration",
+    13: "excitation force",
+    15: "pressure",
+    16: "mass",
+    17: "time",
+    18: "frequency",
+    19: "rpm",
+    20: "order",
+}
+_ACC_RE = re.compile(r"^acc_([A-Za-z0-9]+)_([xyz])$")
+_ID_WIDTH = 80
+_MARK = "guidefit"
+_E13_5 = 5.000001e-6  # largest relative rounding error of an E13.5 field
+_ACC_LABELS = {
+    "": "m/s^2",
+    "none": "m/s^2",
+    "m/s^2": "m/s^2",
+    "m/s2": "m/s^2",
+    "m/s**2": "m/s^2",
+    "m/s/s": "m/s^2",
+    "ms^-2": "m/s^2",
+    "g": "g",
+}
+_FORCE_LABELS = {"": "N", "none": "N", "n": "N"}
+_INSTALL_HINT = "needs the optional extra: pip install 'guidefit[uff]'"
+
+
+# ----------------------------------------------------------------- numbering
+
+
+def point_nodes(points: Iterable[str]) -> dict[str, int]:
+    """UFF node of each measuring point name.
+
+    A, B, C, D are nodes 1-4 (:data:`POINT_NODES`); the k-th other name
+    (k = 1, 2, ..., in order of first appearance) is node 10 + k.
+
+    Parameters
+    ----------
+    points : iterable of str
+        Point names, repeats allowed (e.g. one per channel).
+
+    Returns
+    -------
+    dict of str to int
+
+    Raises
+    ------
+    RecordingError
+        More than 89 other names (their nodes would reach the hammer's 101).
+
+    Examples
+    --------
+    >>> point_nodes(["A", "C", "E", "A", "top"])
+    {'A': 1, 'C': 3, 'E': 11, 'top': 12}
+    """
+    nodes: dict[str, int] = {}
+    others = 0
+    for point in points:
+        if point in nodes:
+            continue
+        if point in POINT_NODES:
+            nodes[point] = POINT_NODES[point]
+            continue
+        others += 1
+        node = OTHER_POINT_NODE_BASE + others
+        if node > REFERENCE_NODE_BASE:
+            raise RecordingError(
+                f"point '{point}': more than {REFERENCE_NODE_BASE - OTHER_POINT_NODE_BASE} "
+                "point names besides A-D; their nodes would collide with the hammer's"
+            )
+        nodes[point] = node
+    return nodes
+
+
+def direction_code(direction, axis: str | None = None, where: str = "direction") -> int:
+    """UFF direction code (+-1, +-2, +-3 for +-X, +-Y, +-Z) of a unit vector.
+
+    Parameters
+    ----------
+    direction : array_like, shape (3,)
+        Unit vector in the carriage frame.
+    axis : {"x", "y", "z"}, optional
+        The axis the vector must lie along (a channel's axis letter); by
+        default its largest component.
+    where : str
+        Start of the error message (file, run, channel).
+
+    Returns
+    -------
+    int
+
+    Raises
+    ------
+    RecordingError
+        The vector is not along ``axis`` (or any axis) within
+        :data:`DIRECTION_TOLERANCE`.
+
+    Examples
+    --------
+    >>> direction_code([0, -1, 0]), direction_code([1, 0, 0], "x"), direction_code([0, 0, -1], "z")
+    (-2, 1, -3)
+    """
+    vec = np.asarray(direction, dtype=np.float64).reshape(3)
+    k = "xyz".index(axis) if axis else int(np.argmax(np.abs(vec)))
+    component = float(vec[k])
+    if not abs(component) >= 1.0 - DIRECTION_TOLERANCE:
+        along = f"the {axis} axis" if axis else "an axis"
+        shown = ", ".join(f"{v:.6g}" for v in vec)
+        raise RecordingError(
+            f"{where}: ({shown}) is not along {along}; UFF-58 directions are +-X, +-Y, +-Z "
+            f"(tolerance {DIRECTION_TOLERANCE:g})"
+        )
+    return (k + 1) if component > 0 else -(k + 1)
+
+
+def direction_vector(code: int) -> np.ndarray:
+    """Unit vector of a UFF translation direction code (inverse of :func:`direction_code`).
+
+    Examples
+    --------
+    >>> direction_vector(-2).tolist()
+    [0.0, -1.0, 0.0]
+    """
+    code = int(code)
+    if abs(code) not in (1, 2, 3):
+        raise ValueError(f"code={code}: expected a translation +-1, +-2 or +-3")
+    vec = np.zeros(3)
+    vec[abs(code) - 1] = 1.0 if code > 0 else -1.0
+    return vec
+
+
+def _direction_label(code: int) -> str:
+    if abs(code) in _DIRECTION_LABELS:
+        return ("+" if code > 0 else "-") + _DIRECTION_LABELS[abs(code)]
+    return str(code)
+
+
+# ------------------------------------------------------------------- writing
+
+
+def _pyuff(display: str):
+    try:
+        import pyuff
+    except ImportError:
+        raise RecordingError(f"{display}: UFF {_INSTALL_HINT}") from None
+    return pyuff
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip().splitlines()
+    return text[0] if text else exc.__class__.__name__
+
+
+def _id_line(text: str) -> str:
+    text = " ".join(str(text).splitlines()).rstrip()
+    return (text or "NONE")[:_ID_WIDTH]
+
+
+def _provenance(**items) -> str:
+    """ID line 5: ``guidefit key=value ...``; ``guide`` last and dropped if too long."""
+    guide = items.pop("guide", None)
+    text = " ".join([_MARK] + [f"{k}={v}" for k, v in items.items() if v is not None])
+    if guide and len(text) + len(" guide=") + len(str(guide)) <= _ID_WIDTH:
+        text += f" guide={guide}"
+    return text
+
+
+def _units_set(pyuff) -> dict:
+    return pyuff.prepare_164(
+        units_code=1,
+        units_description="SI: Meter (newton)",
+        temp_mode=2,
+        length=1.0,
+        force=1.0,
+        temp=1.0,
+        temp_offset=273.15,
+    )
+
+
+def _even_spacing(x: np.ndarray, where: str) -> int:
+    if x.size < 2:
+        raise RecordingError(f"{where}: {x.size} abscissa value(s); UFF-58 needs at least 2")
+    if not np.all(np.isfinite(x)):
+        raise RecordingError(f"{where}: abscissa has non-finite values")
+    step = np.diff(x)
+    return int(bool(step[0] > 0 and np.allclose(step, step[0], rtol=1e-9, atol=0.0)))
+
+
+def _set58(pyuff, *, func_type, ids, rsp, ref, x, data, spacing, abscissa, ordinate, denominator):
+    """One dataset 58 dict; ``abscissa``/``ordinate``/``denominator`` are (spec type, label, units)."""
+    values = np.asarray(data)
+    values = np.where(np.isfinite(values), values, 0)  # UFF has no NaN
+    dset = pyuff.prepare_58(
+        binary=0,
+        id1=_id_line(ids[0]),
+        id2=_id_line(ids[1]),
+        id3="NONE",
+        id4="NONE",
+        id5=_id_line(ids[2]),
+        func_type=func_type,
+        rsp_ent_name="NONE",
+        rsp_node=int(rsp[0]),
+        rsp_dir=int(rsp[1]),
+        ref_ent_name="NONE",
+        ref_node=int(ref[0]),
+        ref_dir=int(ref[1]),
+        abscissa_spacing=spacing,
+        abscissa_spec_data_type=abscissa[0],
+        abscissa_axis_units_lab=abscissa[2],
+        ordinate_spec_data_type=ordinate[0],
+        ordinate_axis_units_lab=ordinate[2],
+        orddenom_spec_data_type=denominator[0],
+        orddenom_axis_units_lab=denominator[2],
+        data=values,
+        x=np.asarray(x, dtype=np.float64),
+    )
+    dset["abscissa_axis_lab"] = abscissa[1]
+    dset["ordinate_axis_lab"] = ordinate[1]
+    dset["orddenom_axis_lab"] = denominator[1]
+    return dset
+
+
+def _write_sets(display: str, sets: list) -> None:
+    """Write ASCII datasets to ``<path>.part`` (a fresh file) and move it over ``path``."""
+    pyuff = _pyuff(display)
+    p = Path(display)
+    tmp = p.with_name(p.name + ".part")
+    try:
+        with contextlib.suppress(FileNotFoundError):
+            tmp.unlink()
+        pyuff.UFF(os.fspath(tmp)).write_sets(sets, mode="overwrite")
+        os.replace(tmp, p)
+    except BaseException as exc:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        if isinstance(exc, Exception) and not isinstance(exc, GuidefitError):
+            raise RecordingError(f"{display}: cannot write UFF ({_first_line(exc)})") from None
+        raise
+
+
+def _check_suffix(display: str) -> None:
+    suffix = Path(display).suffix.lower()
+    if suffix not in UFF_SUFFIXES:
+        raise RecordingError(
+            f"{display}: unknown file type '{Path(display).suffix}'; a UFF file ends in .uff or .unv"
+        )
+
+
+def write_frf_uff(path, frfsets, *, recording=None) -> None:
+    """Write FRFs and coherences as UFF-58 (ASCII), two datasets per response channel and run.
+
+    See the module docstring for the numbering and the fields. Without
+    ``recording`` the FRF sets do not say which way the hammer and the sensors
+    pointed: the response direction is then +axis of the channel name and the
+    reference direction 0 (scalar, unknown).
+
+    Parameters
+    ----------
+    path : str or path-like
+        ``.uff`` or ``.unv``; replaced if it exists.
+    frfsets : FrfSet or sequence of FrfSet
+        From :func:`guidefit.frf.compute_frf`; response channels named
+        ``acc_<point>_<axis>``. The i-th set is run i (reference node 100 + i).
+    recording : Recording or str or path-like, optional
+        The recording the FRFs came from: its runs (matched by name) give the
+        reference direction (excitation direction) and the sign of each
+        response direction.
+
+    Raises
+    ------
+    RecordingError
+        pyuff missing, a channel without point and axis, a direction not along
+        an axis, a run missing from ``recording``, or the file cannot be written.
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> import numpy as np
+    >>> from guidefit.frf import frf_from_records
+    >>> rec = np.random.default_rng(5).normal(size=(2, 8, 2))
+    >>> frf = frf_from_records(rec, 8.0, channel_names=("force", "acc_A_y"), run="vertical")
+    >>> path = os.path.join(tempfile.mkdtemp(), "frf.uff")
+    >>> write_frf_uff(path, frf)
+    >>> import pyuff
+    >>> sets = pyuff.UFF(path).read_sets()
+    >>> [(s["type"], s.get("func_type"), s.get("rsp_node"), s.get("ref_node")) for s in sets]
+    [(164, None, None, None), (58, 4, 1, 101), (58, 6, 1, 101)]
+    """
+    display = os.fspath(path)
+    _check_suffix(display)
+    from guidefit.frf import FrfSet
+
+    items = [frfsets] if isinstance(frfsets, FrfSet) else list(frfsets)
+    if not items:
+        raise RecordingError(f"{display}: no FRF sets to write")
+    runs = _runs_by_name(recording)
+    names = []
+    for frf in items:
+        for channel in frf.channels:
+            if not _ACC_RE.match(channel):
+                raise RecordingError(
+                    f"{display}: run '{frf.run}': channel '{channel}' is not 'acc_<point>_<axis>'; "
+                    "UFF-58 needs a point and an axis"
+                )
+            names.append(_ACC_RE.match(channel).group(1))
+    nodes = point_nodes(names)
+    pyuff = _pyuff(display)
+    sets = [_units_set(pyuff)]
+    frequency = (SPEC_FREQUENCY, "Frequency", "Hz")
+    for i, frf in enumerate(items, start=1):
+        where = f"{display}: run '{frf.run}'"
+        f = np.asarray(frf.frequency_hz, dtype=np.float64).reshape(-1)
+        H = np.asarray(frf.H)
+        coh = np.asarray(frf.coherence)
+        shape = (f.size, len(frf.channels))
+        if H.shape != shape or coh.shape != shape:
+            raise RecordingError(
+                f"{where}: H {H.shape} and coherence {coh.shape}; expected {shape} "
+                "(frequencies, channels)"
+            )
+        spacing = _even_spacing(f, where)
+        run = None
+        if runs is not None:
+            run = runs.get(frf.run)
+            if run is None:
+                raise RecordingError(
+                    f"{where}: the recording has no run of that name; have {', '.join(runs)}"
+                )
+        ref = (REFERENCE_NODE_BASE + i, 0)
+        if run is not None:
+            ref = (
+                ref[0],
+                direction_code(run.excitation_direction, None, f"{where}: excitation_direction"),
+            )
+        provenance = _provenance(
+            estimator=frf.estimator,
+            n_averages=frf.n_averages,
+            sample_rate_hz=getattr(frf, "sample_rate_hz", None),
+        )
+        for k, channel in enumerate(frf.channels):
+            point, axis = _ACC_RE.match(channel).groups()
+            code = _AXIS_CODES[axis]
+            if run is not None:
+                if channel not in run.channel_names:
+                    raise RecordingError(f"{where}: channel '{channel}' not in the recording's run")
+                sensor = run.channels[run.channel_names.index(channel)]
+                code = direction_code(sensor.direction, axis, f"{where}: channel '{channel}'")
+            rsp = (nodes[point], code)
+            sets.append(
+                _set58(
+                    pyuff,
+                    func_type=FUNCTION_FRF,
+                    ids=(f"{frf.estimator} {channel}/force", frf.run, provenance),
+                    rsp=rsp,
+                    ref=ref,
+                    x=f,
+                    data=H[:, k].astype(np.complex128),
+                    spacing=spacing,
+                    abscissa=frequency,
+                    ordinate=(SPEC_ACCELERATION, "Accelerance", "m/s^2"),
+                    denominator=(SPEC_FORCE, "Force", "N"),
+                )
+            )
+            sets.append(
+                _set58(
+                    pyuff,
+                    func_type=FUNCTION_COHERENCE,
+                    ids=(f"coherence {channel}/force", frf.run, provenance),
+                    rsp=rsp,
+                    ref=ref,
+                    x=f,
+                    data=coh[:, k].real.astype(np.float64),
+                    spacing=spacing,
+                    abscissa=frequency,
+                    ordinate=(SPEC_GENERAL, "Coherence", "NONE"),
+                    denominator=(SPEC_UNKNOWN, "NONE", "NONE"),
+                )
+            )
+    _write_sets(display, sets)
+
+
+def _runs_by_name(recording) -> dict | None:
+    if recording is None:
+        return None
+    from guidefit.io.registry import read_recording
+
+    if not isinstance(recording, Recording):
+        recording = read_recording(recording)
+    return {run.name: run for run in recording.runs}
+
+
+def write_uff_recording(path, recording) -> None:
+    """Write a recording's time data as UFF-58 (ASCII), one dataset per channel and run.
+
+    Each run becomes one continuous record per channel (a ``hits`` run: its
+    hit records back to back), in SI units (an acceleration stored in g is
+    converted to m/s^2). The force is written at the reference DOF (node
+    100 + i, the excitation direction) with ordinate type 13; accelerations
+    at their point's node with type 12. Positions are not written (UFF-58 has
+    none). See the module docstring for the numbering and the fields.
+
+    Parameters
+    ----------
+    path : str or path-like
+        ``.uff`` or ``.unv``; replaced if it exists.
+    recording : RecordingData, RunData or Recording
+        In memory (e.g. from :func:`guidefit.simulate.simulate`) or read from a file.
+
+    Raises
+    ------
+    RecordingError
+        pyuff missing, a direction not along an axis, a run without data, or
+        the file cannot be written.
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> import numpy as np
+    >>> from guidefit.io import RunData
+    >>> run = RunData("vertical", 1000.0, [0, -1, 0], ["force", "acc_A_y"], ["N", "m/s^2"],
+    ...               [[0, 0, 0], [0.03, 0, 0.045]], [[0, -1, 0], [0, 1, 0]],
+    ...               data=np.array([[0.0, 1.0], [2.0, 3.0], [4.0, 5.0]]))
+    >>> path = os.path.join(tempfile.mkdtemp(), "rec.uff")
+    >>> write_uff_recording(path, run)
+    >>> back = read_uff_recording(path).runs[0]
+    >>> back.name, back.sample_rate_hz, back.channel_names, back.read_block().tolist()
+    ('vertical', 1000.0, ('force', 'acc_A_y'), [[0.0, 1.0], [2.0, 3.0], [4.0, 5.0]])
+    """
+    display = os.fspath(path)
+    _check_suffix(display)
+    if isinstance(recording, Recording):
+        recording = recording.to_data()
+    elif isinstance(recording, RunData):
+        recording = RecordingData((recording,))
+    if not isinstance(recording, RecordingData):
+        raise TypeError(
+            f"recording: expected RecordingData, RunData or Recording, got {type(recording).__name__}"
+        )
+    names = [
+        _ACC_RE.match(name).group(1)
+        for run in recording.runs
+        for name in run.channel_names
+        if name != "force"
+    ]
+    nodes = point_nodes(names)
+    pyuff = _pyuff(display)
+    sets = [_units_set(pyuff)]
+    time = (SPEC_TIME, "Time", "s")
+    for i, run in enumerate(recording.runs, start=1):
+        where = f"{display}: run '{run.name}'"
+        if run.data is None:
+            raise RecordingError(f"{where}: no data to write")
+        samples = np.asarray(run.data, dtype=np.float64).reshape(-1, run.n_channels)
+        scale = np.array(
+            [
+                FORCE_UNITS[u] if name == "force" else ACCELERATION_UNITS[u]
+                for name, u in zip(run.channel_names, run.units)
+            ]
+        )
+        samples = samples * scale
+        x = np.arange(samples.shape[0]) / run.sample_rate_hz
+        _even_spacing(x, where)
+        ref = (
+            REFERENCE_NODE_BASE + i,
+            direction_code(run.excitation_direction, None, f"{where}: excitation_direction"),
+        )
+        provenance = _provenance(sample_rate_hz=repr(run.sample_rate_hz), guide=recording.guide)
+        for c, name in enumerate(run.channel_names):
+            if name == "force":
+                rsp, ordinate = ref, (SPEC_FORCE, "Force", "N")
+            else:
+                point, axis = _ACC_RE.match(name).groups()
+                code = direction_code(run.directions[c], axis, f"{where}: channel '{name}'")
+                rsp, ordinate = (nodes[point], code), (SPEC_ACCELERATION, "Acceleration", "m/s^2")
+            sets.append(
+                _set58(
+                    pyuff,
+                    func_type=FUNCTION_TIME,
+                    ids=(name, run.name, provenance),
+                    rsp=rsp,
+                    ref=ref,
+                    x=x,
+                    data=samples[:, c],
+                    spacing=1,
+                    abscissa=time,
+                    ordinate=ordinate,
+                    denominator=(SPEC_UNKNOWN, "NONE", "NONE"),
+                )
+            )
+    _write_sets(display, sets)
+
+
+# ------------------------------------------------------------------- reading
+
+
+def _count_delimiters(raw: bytes) -> int:
+    """Number of ``    -1`` dataset delimiters, found as pyuff finds them."""
+    count = 0
+    n = len(raw)
+    index = raw.find(b"    -1")
+    while index != -1:
+        end = index + 6
+        if end == n or raw[end] in (10, 13) or raw[end : index + 80] == b" " * 74:
+            count += 1
+        index = raw.find(b"    -1", index + 1)
+    return count
+
+
+def _read_set(uff, i: int, kind: int, display: str, header_only: bool = False) -> dict:
+    try:
+        out = uff.read_sets(i - 1, header_only=header_only)
+    except Exception as exc:  # noqa: BLE001 - pyuff raises bare Exception
+        raise RecordingError(
+            f"{display}: set {i} (dataset {kind}): cannot be read ({_first_line(exc)})"
+        ) from None
+    if isinstance(out, list):  # pyuff: a dict for one set, a list for several
+        out = out[0]
+    return out
+
+
+def _describe(kinds: list[int], functions: list[int]) -> str:
+    parts = []
+    for f in sorted(set(functions)):
+        parts.append(
+            f"{functions.count(f)} dataset(s) 58 of function type {f} "
+            f"({_FUNCTION_NAMES.get(f, 'other')})"
+        )
+    others = sorted({k for k in kinds if k != 58})
+    if others:
+        parts.append("datasets " + ", ".join(str(k) for k in others))
+    return "; ".join(parts) or "nothing"
+
+
+def _sets_of(display: str) -> list[tuple[int, dict]]:
+    """The time datasets of a UFF file as (1-based set number, dataset dict)."""
+    pyuff = _pyuff(display)
+    try:
+        uff = pyuff.UFF(display)
+        kinds = [int(k) for k in uff.get_set_types()]
+    except Exception as exc:  # noqa: BLE001 - pyuff raises bare Exception
+        raise RecordingError(f"{display}: not a readable UFF file ({_first_line(exc)})") from None
+    if not kinds:
+        raise RecordingError(
+            f"{display}: no UFF datasets (blocks between '    -1' lines); expected UFF-58 time data"
+        )
+    if _count_delimiters(Path(display).read_bytes()) % 2:
+        raise RecordingError(
+            f"{display}: set {len(kinds) + 1} is truncated (no closing '    -1' line)"
+        )
+    time_sets: list[int] = []
+    functions: list[int] = []
+    for i, kind in enumerate(kinds, start=1):
+        if kind == 164:
+            _check_units(_read_set(uff, i, kind, display), i, display)
+        elif kind == 58:
+            head = _read_set(uff, i, kind, display, header_only=True)
+            functions.append(int(head.get("func_type", -1)))
+            if functions[-1] == FUNCTION_TIME:
+                time_sets.append(i)
+    if not time_sets:
+        raise RecordingError(
+            f"{display}: no time data (dataset 58, function type 1); found "
+            f"{_describe(kinds, functions)}. guidefit reads UFF-58 time records as a recording"
+        )
+    return [(i, _read_set(uff, i, 58, display)) for i in time_sets]
+
+
+def _check_units(dset: dict, i: int, display: str) -> None:
+    length, force = float(dset.get("length", 1.0)), float(dset.get("force", 1.0))
+    if not (np.isclose(length, 1.0, rtol=1e-9) and np.isclose(force, 1.0, rtol=1e-9)):
+        raise RecordingError(
+            f"{display}: set {i} (units, dataset 164): '{dset.get('units_description', '')}' has "
+            f"length factor {length:g} and force factor {force:g}; guidefit reads SI (factors 1)"
+        )
+
+
+def _provenance_of(dset: dict) -> dict:
+    text = str(dset.get("id5", ""))
+    if not text.startswith(_MARK + " ") and text != _MARK:
+        return {}
+    out = {}
+    head, _, guide = text.partition(" guide=")
+    for key, value in re.findall(r"(\w+)=(\S+)", head):
+        out[key] = value
+    if guide:
+        out["guide"] = guide.strip()
+    out[_MARK] = True
+    return out
+
+
+def _sample_rate(inc: float, exact: str | None) -> float:
+    """Sample rate from an E13.5 increment: guidefit's exact rate, a whole number of Hz, or 1/inc."""
+    if exact is not None:
+        with contextlib.suppress(ValueError):
+            rate = float(exact)
+            if rate > 0 and abs(1.0 / rate - inc) <= _E13_5 * inc:
+                return rate
+    whole = round(1.0 / inc)
+    if whole > 0 and abs(1.0 / whole - inc) <= _E13_5 * inc:
+        return float(whole)
+    return 1.0 / inc
+
+
+def _record(i: int, dset: dict, display: str) -> dict:
+    """Validate one time dataset; return what a run needs of it."""
+    where = f"{display}: set {i}"
+    ord_type = int(dset.get("ord_data_type", 0))
+    if ord_type in (5, 6):
+        raise RecordingError(
+            f"{where}: complex time data (ordinate data type {ord_type}); "
+            "expected real values (2 or 4)"
+        )
+    abscissa = int(dset.get("abscissa_spec_data_type", 0))
+    if abscissa not in (SPEC_UNKNOWN, SPEC_TIME):
+        raise RecordingError(
+            f"{where}: abscissa is {_SPEC_NAMES.get(abscissa, 'type')} "
+            f"({abscissa}); expected time (17)"
+        )
+    data = np.asarray(dset.get("data"), dtype=np.float64).reshape(-1)
+    n_header = int(dset.get("num_pts", data.size))
+    if data.size != n_header:
+        raise RecordingError(f"{where}: {data.size} values for the {n_header} its header gives")
+    if data.size < 2:
+        raise RecordingError(f"{where}: {data.size} value(s); a time record needs at least 2")
+    if int(dset.get("abscissa_spacing", 1)) == 1:
+        inc = float(dset.get("abscissa_inc", 0.0))
+        start = float(dset.get("abscissa_min", 0.0))
+    else:
+        x = np.asarray(dset.get("x"), dtype=np.float64).reshape(-1)
+        step = np.diff(x)
+        inc = float((x[-1] - x[0]) / (x.size - 1))
+        if not np.allclose(step, inc, rtol=1e-4, atol=0.0):
+            raise RecordingError(
+                f"{where}: uneven time steps ({step.min():g} to {step.max():g} s); "
+                "expected one sample rate"
+            )
+        start = float(x[0])
+    if not (np.isfinite(inc) and inc > 0):
+        raise RecordingError(
+            f"{where}: abscissa increment {inc:g} s; expected a positive time step"
+        )
+    spec = int(dset.get("ordinate_spec_data_type", 0))
+    label = str(dset.get("ordinate_axis_units_lab", "")).strip()
+    return {
+        "set": i,
+        "data": data,
+        "inc": inc,
+        "start": start,
+        "spec": spec,
+        "label": label,
+        "rsp": (int(dset.get("rsp_node", 0)), int(dset.get("rsp_dir", 0))),
+        "ref": (int(dset.get("ref_node", 0)), int(dset.get("ref_dir", 0))),
+        "id1": str(dset.get("id1", "")).strip(),
+        "id2": str(dset.get("id2", "")).strip(),
+        "provenance": _provenance_of(dset),
+    }
+
+
+def _unit(record: dict, force: bool, display: str) -> str:
+    table = _FORCE_LABELS if force else _ACC_LABELS
+    key = record["label"].lower().replace(" ", "")
+    if key not in table:
+        allowed = "N" if force else "m/s^2 or g"
+        raise RecordingError(
+            f"{display}: set {record['set']}: {'force' if force else 'acceleration'} unit "
+            f"'{record['label']}' unsupported; expected {allowed}"
+        )
+    return table[key]
+
+
+def _derived_channel(record: dict) -> str:
+    node, code = record["rsp"]
+    point = "ABCD"[node - 1] if 1 <= node <= 4 else f"N{node}"
+    return f"acc_{point}_{'xyz'[abs(code) - 1]}"
+
+
+def _group_runs(records: list[dict], display: str) -> list[dict]:
+    """Records grouped by reference DOF, force and accelerations named and checked."""
+    groups: dict[tuple[int, int], list[dict]] = {}
+    for record in records:
+        groups.setdefault(record["ref"], []).append(record)
+    runs = []
+    for ref, members in groups.items():
+        ref_text = f"reference node {ref[0]} direction {_direction_label(ref[1])}"
+        first = members[0]
+        for r in members[1:]:
+            if r["data"].size != first["data"].size:
+                raise RecordingError(
+                    f"{display}: set {r['set']}: {r['data'].size} samples, set {first['set']} of "
+                    f"the same run ({ref_text}) has {first['data'].size}; expected equal lengths"
+                )
+            if abs(r["inc"] - first["inc"]) > 1e-9 * first["inc"]:
+                raise RecordingError(
+                    f"{display}: set {r['set']}: time step {r['inc']:g} s, set {first['set']} of "
+                    f"the same run ({ref_text}) has {first['inc']:g} s"
+                )
+            if abs(r["start"] - first["start"]) > 0.5 * first["inc"]:
+                raise RecordingError(
+                    f"{display}: set {r['set']}: starts at {r['start']:g} s, set {first['set']} of "
+                    f"the same run ({ref_text}) at {first['start']:g} s; records must be simultaneous"
+                )
+        forces = [r for r in members if r["spec"] == SPEC_FORCE]
+        if not forces:
+            forces = [r for r in members if r["rsp"] == ref and r["spec"] != SPEC_ACCELERATION]
+        if not forces:
+            raise RecordingError(
+                f"{display}: run at {ref_text} (set {first['set']}...): no force record "
+                "(ordinate type 13, or a record at the reference DOF)"
+            )
+        if len(forces) > 1:
+            sets = ", ".join(str(r["set"]) for r in forces)
+            raise RecordingError(
+                f"{display}: sets {sets}: {len(forces)} force records for {ref_text}; expected one"
+            )
+        force = forces[0]
+        code = ref[1] if ref[1] != 0 else force["rsp"][1]
+        if abs(code) not in (1, 2, 3):
+            raise RecordingError(
+                f"{display}: set {force['set']}: {ref_text} gives no hammer direction; "
+                "expected a translation +-1, +-2 or +-3"
+            )
+        for r in members:
+            if r is force:
+                continue
+            if r["spec"] != SPEC_ACCELERATION:
+                raise RecordingError(
+                    f"{display}: set {r['set']}: ordinate is {_SPEC_NAMES.get(r['spec'], 'type')} "
+                    f"({r['spec']}); guidefit reads acceleration (12) and force (13)"
+                )
+            if abs(r["rsp"][1]) not in (1, 2, 3):
+                raise RecordingError(
+                    f"{display}: set {r['set']}: response direction {r['rsp'][1]}; an acceleration "
+                    "needs a translation +-1, +-2 or +-3"
+                )
+        runs.append({"ref": ref, "code": code, "members": members, "force": force})
+    return runs
+
+
+def _names(run: dict) -> tuple[str | None, list[str]]:
+    """(run name or None, channel names) from guidefit's ID lines, else derived ones."""
+    members = run["members"]
+    derived = ["force" if r is run["force"] else _derived_channel(r) for r in members]
+    if not all(r["provenance"] for r in members):
+        return None, derived
+    names = [r["id1"] for r in members]
+    ok = all(
+        (name == "force") == (r is run["force"]) and (name == "force" or _ACC_RE.match(name))
+        for name, r in zip(names, members)
+    )
+    if not ok or len(set(names)) != len(names):
+        names = derived
+    run_names = {r["id2"] for r in members}
+    return (run_names.pop() if len(run_names) == 1 else None), names
+
+
+def read_uff_recording(path) -> Recording:
+    """Read UFF-58 time data as a recording (one continuous run per reference DOF).
+
+    See the module docstring for how runs, channels, positions and the sample
+    rate follow from the datasets. The samples are held in memory (the text
+    file is parsed whole), like a CSV recording's.
+
+    Parameters
+    ----------
+    path : str or path-like
+        ``.uff`` or ``.unv`` with datasets 58 of function type 1.
+
+    Returns
+    -------
+    guidefit.io.records.Recording
+        Layout ``signals``; read samples with ``run.read_block()``.
+
+    Raises
+    ------
+    RecordingError
+        pyuff missing; the file is not UFF, holds no time data, or a dataset
+        does not fit (complex, not time, not force or acceleration, unequal
+        lengths or rates in a run, no or two force records, non-SI units): one
+        line naming the file and the set.
+
+    Examples
+    --------
+    See :func:`write_uff_recording`.
+    """
+    display = os.fspath(path)
+    _check_suffix(display)
+    p = Path(display)
+    if not p.exists():
+        raise RecordingError(f"{display}: no such file")
+    if p.is_dir():
+        raise RecordingError(f"{display}: is a directory; expected a UFF file")
+    if p.stat().st_size == 0:
+        raise RecordingError(f"{display}: file is empty")
+    records = [_record(i, dset, display) for i, dset in _sets_of(display)]
+    groups = _group_runs(records, display)
+    guide = next((r["provenance"].get("guide") for r in records if r["provenance"]), None)
+    points = _default_points(guide)
+
+    runs = []
+    used: set[str] = set()
+    for run in groups:
+        ref = run["ref"]
+        members = run["members"]
+        force = run["force"]
+        derived_run = f"ref{ref[0]}{_direction_label(run['code'])}"
+        name, channel_names = _names(run)
+        if not name or name in used:
+            name = derived_run
+        used.add(name)
+        where = f"{display}: run '{name}' (set {members[0]['set']}...)"
+        excitation = direction_vector(run["code"])
+        units, positions, directions = [], [], []
+        for channel, r in zip(channel_names, members):
+            if r is force:
+                units.append(_unit(r, True, display))
+                positions.append(np.zeros(3))
+                directions.append(excitation)
+            else:
+                units.append(_unit(r, False, display))
+                point = _ACC_RE.match(channel).group(1)
+                positions.append(points.get(point, np.zeros(3)))
+                directions.append(direction_vector(r["rsp"][1]))
+        data = np.ascontiguousarray(np.column_stack([r["data"] for r in members]))
+        data.setflags(write=False)
+        provenance = force["provenance"]
+        rate = _sample_rate(force["inc"], provenance.get("sample_rate_hz"))
+        try:
+            checked = RunData(
+                name,
+                rate,
+                excitation,
+                channel_names,
+                units,
+                positions,
+                directions,
+                data=data,
+                layout="signals",
+            )
+        except RecordingError as exc:
+            raise RecordingError(f"{where}: {exc}") from None
+        # in memory, as for CSV recordings
+        source = ArraySource(data)
+        runs.append(Run.from_header(checked, source, n_samples=int(data.shape[0]), file=display))
+    return Recording(path=display, guide=guide, description="", runs=tuple(runs))
+
+
+def _default_points(guide: str | None) -> dict[str, np.ndarray]:
+    try:
+        return default_points(guide)
+    except GuidefitError:  # a guide this installation does not know: MRB35's A-D
+        return default_points(None)
+
+
+FORMATS = (
+    FileFormat(
+        name="UFF-58 time data",
+        suffixes=UFF_SUFFIXES,
+        kind="recording",
+        read=lambda p, display: read_uff_recording(display),
+        write=write_uff_recording,
+        extra="uff",
+    ),
+    FileFormat(
+        name="UFF-58 FRFs",
+        suffixes=UFF_SUFFIXES,
+        kind="frf",
+        write=write_frf_uff,
+        extra="uff",
+    ),
+)
