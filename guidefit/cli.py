@@ -386,19 +386,54 @@ def explain_cmd(recording, modes_path, guide_name, candidates, as_json, plot_pat
         report.render_explanation(result)
 
 
+def _id_list(text: str | None, option: str):
+    """``"101,102"`` -> [101, 102] (positive integers), None when not given."""
+    if text is None:
+        return None
+    try:
+        values = [int(v) for v in text.split(",")]
+    except ValueError:
+        raise click.BadParameter(f"'{text}': expected comma-separated integers", param_hint=option) from None
+    if any(v < 1 for v in values):
+        raise click.BadParameter(f"'{text}': ids must be positive", param_hint=option)
+    return values
+
+
 @main.command(name="export")
 @click.argument("results", type=click.Path(dir_okay=False))
 @click.option("--format", "fmt", type=click.Choice(["nastran", "ansys", "abaqus", "json"]), default="json",
               show_default=True)
-@click.option("--vertical", "n_vertical", default=4, show_default=True, help="Vertical elements per carriage.")
-@click.option("--horizontal", "n_horizontal", default=8, show_default=True,
-              help="Horizontal elements per carriage.")
+@click.option("--joint", type=click.Choice(["explained", "apparent"]), default="explained", show_default=True,
+              help="explained: the joint of the explained model, rig effects (sensor mass, soft support) removed; "
+                   "apparent: the raw Eq. 24-29 values of the test.")
+@click.option("--explain", "explain_paths", multiple=True, type=click.Path(dir_okay=False),
+              help="explain --json output to use (matched by file; default: each result's modes are explained).")
+@click.option("--guide", "guide_name", help="Guide name or TOML (default: the one the results name).")
+@click.option("--element", type=click.Choice(["matrix", "bush", "springs"]), default="matrix", show_default=True,
+              help="matrix: full 6x6 K and C (DMIG, MATRIX27, coupled connector); bush: their diagonal (CBUSH, "
+                   "COMBIN14, connector); springs: the paper's 1-D vertical and horizontal sets.")
+@click.option("--units", type=click.Choice(["si", "mm-N-s", "mm-t-s"]), default="si", show_default=True)
+@click.option("--axis-map", metavar="x=AX,y=AX,z=AX",
+              help="Model axes (x lateral, y vertical, z along the rail) in the machine frame, e.g. x=X,y=Z,z=-Y.")
+@click.option("--carriage-node", "carriage_nodes", metavar="ID,...", help="Carriage node id per carriage.")
+@click.option("--rail-node", "rail_nodes", metavar="ID,...", help="Rail node id per carriage.")
+@click.option("--first-element", default=30001, show_default=True, type=click.IntRange(1, None))
+@click.option("--id-step", default=100, show_default=True, type=click.IntRange(1, None),
+              help="Element ids per carriage.")
+@click.option("--vertical", "n_vertical", default=4, show_default=True, type=click.IntRange(1, 10_000),
+              help="springs: vertical elements per carriage.")
+@click.option("--horizontal", "n_horizontal", default=8, show_default=True, type=click.IntRange(1, 10_000),
+              help="springs: horizontal elements per carriage.")
 @click.option("-o", "--out", "out_path", type=click.Path(dir_okay=False), help="Write here instead of stdout.")
-def export_cmd(results, fmt, n_vertical, n_horizontal, out_path):
-    """Spring-damper elements of identified joints for a machine FEM model (paper Fig. 10)."""
+def export_cmd(results, fmt, joint, explain_paths, guide_name, element, units, axis_map, carriage_nodes,
+               rail_nodes, first_element, id_step, n_vertical, n_horizontal, out_path):
+    """Joints for a machine FEM model: 6x6 stiffness and damping per carriage (paper Fig. 10)."""
     from guidefit.export import export
 
-    text = export(results, fmt, n_vertical=n_vertical, n_horizontal=n_horizontal)
+    text = export(results, fmt, joint=joint, explanations=explain_paths, guide=guide_name, element=element,
+                  units=units, axis_map=axis_map, carriage_nodes=_id_list(carriage_nodes, "--carriage-node"),
+                  rail_nodes=_id_list(rail_nodes, "--rail-node"), first_element=first_element, id_step=id_step,
+                  n_vertical=n_vertical, n_horizontal=n_horizontal)
     if out_path:
         with open(out_path, "w", encoding="utf-8") as handle:
             handle.write(text)

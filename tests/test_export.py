@@ -1,83 +1,315 @@
-"""Export to FEM spring-damper cards: fields, units and the split over elements."""
+"""Export of joints to FEM decks: explained vs apparent values, full matrices, units, axes, ids, safety.
+
+Decks are read back with pyNastran (Nastran) and with small parsers of the
+ANSYS and Abaqus cards written here; every number is compared with the
+joint it came from.
+"""
 
 import json
+import math
+from pathlib import Path
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
 from guidefit.cli import main
-from guidefit.errors import RecordingError
-from guidefit.export import joint_elements, read_results, to_abaqus, to_ansys, to_nastran
+from guidefit.export import (
+    _nastran_float,
+    _nastran_real,
+    apparent_joint,
+    build_elements,
+    explained_joint,
+    parse_axis_map,
+    read_results,
+    to_nastran,
+)
+from guidefit.model import vibration as vib
+from guidefit.model.guides import load_guide
 
-RESULT = {"file": "carriage1.h5", "parameters": {
+ROOT = Path(__file__).resolve().parents[1]
+PAPER_LIKE = ROOT / "sample_data" / "mrb35_paper_like.h5"
+RESULT = {"file": "carriage1.h5", "guide": "MRB35", "parameters": {
     "K_V": {"value": 1.03e9, "unit": "N/m"}, "c_V": {"value": 2750.0, "unit": "N*s/m"},
-    "K_H": {"value": 1.00e8, "unit": "N/m"}, "c_H": {"value": 3109.0, "unit": "N*s/m"}}}
+    "K_H": {"value": 1.00e8, "unit": "N/m"}, "c_H": {"value": 3109.0, "unit": "N*s/m"}},
+    "modes": [{"label": "vertical", "frequency_hz": 3450.0, "damping_ratio": 0.0288},
+              {"label": "roll_low", "frequency_hz": 1075.0, "damping_ratio": 0.105}]}
+ADEQUATE = {"file": "carriage1.h5", "verdict": "adequate", "guide": "MRB35", "effects": []}
+
+
+def _nominal_k6():
+    k5 = vib.carriage_stiffness_matrix(vib.model_from_guide(load_guide("MRB35")).rollers)
+    k6 = np.zeros((6, 6))
+    idx = np.array([0, 1, 3, 4, 5])
+    k6[np.ix_(idx, idx)] = k5
+    return k6
+
+
+def _run(*args):
+    result = CliRunner().invoke(main, ["export", *map(str, args)])
+    return result.exit_code, result.output
+
+
+def _write(tmp_path, name, docs):
+    path = tmp_path / name
+    path.write_text("".join(json.dumps(d) + "\n" for d in docs))
+    return path
 
 
 @pytest.fixture
 def results_file(tmp_path):
-    path = tmp_path / "results.jsonl"
     second = json.loads(json.dumps(RESULT))
     second["file"] = "carriage2.h5"
-    path.write_text(json.dumps(RESULT) + "\n" + json.dumps(second) + "\n")
-    return path
+    return _write(tmp_path, "results.jsonl", [RESULT, second])
 
 
-def test_elements_sum_to_identified_joint():
-    els = joint_elements([RESULT])
+def _bdf(text, tmp_path):
+    from pyNastran.bdf.bdf import BDF
+
+    path = tmp_path / "deck.bdf"
+    path.write_text(text)
+    model = BDF(debug=None)
+    model.read_bdf(str(path), punch=True, xref=False)
+    return model
+
+
+def _dmig_matrix(dmig, dofs):
+    """The full symmetric matrix of a pyNastran DMIG over the given (grid, component) order."""
+    index = {tuple(int(v) for v in d): k for k, d in enumerate(dofs)}
+    out = np.zeros((len(dofs), len(dofs)))
+    for gj, gi, value in zip(dmig.GCj, dmig.GCi, dmig.Real):
+        a, b = index[tuple(int(v) for v in gi)], index[tuple(int(v) for v in gj)]
+        out[a, b] = out[b, a] = value
+    return out
+
+
+def _rel(a, b):
+    """Largest error relative to each entry's matrix scale sqrt(|A_ii A_jj|) (diagonal: to itself)."""
+    d = np.sqrt(np.abs(np.diag(b)))
+    scale = np.maximum(np.outer(d, d), 1e-300)
+    return float(np.max(np.abs(a - b) / scale))
+
+
+# --------------------------------------------------------------------------- joints
+
+
+def test_apparent_springs_sum_to_the_identified_joint():
+    joint = apparent_joint(RESULT)
+    els = build_elements([joint], "springs")
     vertical = [e for e in els if e.dof == 2]
     horizontal = [e for e in els if e.dof == 1]
     assert len(vertical) == 4 and len(horizontal) == 8
-    assert sum(e.stiffness_n_per_m for e in vertical) == pytest.approx(1.03e9)
-    assert sum(e.damping_ns_per_m for e in horizontal) == pytest.approx(3109.0)
+    assert sum(e.stiffness[1, 1] for e in vertical) == pytest.approx(1.03e9, rel=1e-12)
+    assert sum(e.damping[0, 0] for e in horizontal) == pytest.approx(3109.0, rel=1e-12)
 
 
-def test_nastran_cards_fixed_fields():
-    text = to_nastran(joint_elements([RESULT]))
-    lines = [line for line in text.splitlines() if not line.startswith("$")]
-    pbush = lines[0]
-    assert pbush[:8] == "PBUSH   " and pbush[16:24] == "K       "
-    # vertical element: K on field DOF 2 (columns 32-40): 1.03e9 / 4 = 2.575e8
-    assert float(pbush[32:40].replace("+", "E+")) == pytest.approx(2.575e8, rel=1e-3)
-    b_line = lines[1]
-    assert b_line[8:16] == "B       " and float(b_line[24:32].replace("+", "E+")) == pytest.approx(687.5, rel=1e-3)
-    cbush = lines[2]
-    assert cbush[:8] == "CBUSH   " and int(cbush[24:32]) == 10001 and int(cbush[32:40]) == 20001
-    assert all(len(line) <= 80 for line in lines)
+def test_explained_joint_is_the_roller_matrix_not_the_apparent_value():
+    """explain says 'adequate': the joint is the nominal rollers' matrix, K_xx 1.08e9, not K_H = 1.0e8."""
+    joint = explained_joint(RESULT, ADEQUATE)
+    assert _rel(joint.stiffness, _nominal_k6()) < 1e-12
+    guide = load_guide("MRB35")
+    kn, z, b = guide.roller_stiffness_n_per_m, guide.rollers_per_row, guide.contact_angle_rad
+    assert joint.stiffness[0, 0] == pytest.approx(4 * z * kn * math.cos(b) ** 2, rel=1e-9)
+    assert joint.apparent["K_H"] == 1.0e8 and joint.stiffness[0, 0] > 10 * joint.apparent["K_H"]
+    assert np.allclose(joint.stiffness, joint.stiffness.T) and np.all(joint.stiffness[2] == 0)
+    # damping: for the uncoupled vertical mode the modal damping matrix is Eq. (27) at the rig-free f_V
+    f_v = joint.explained["f_V"]
+    assert joint.damping[1, 1] == pytest.approx(4 * math.pi * guide.mass_kg * f_v * 0.0288, rel=1e-9)
+    assert any("pitch" in n for n in joint.notes)  # unmeasured modes' damping is said
 
 
-def test_ansys_and_abaqus_values():
-    els = joint_elements([RESULT])
-    ansys = to_ansys(els)
-    assert "ET,1,COMBIN14" in ansys and "KEYOPT,2,2,2" in ansys
-    assert f"R,30001,{1.03e9 / 4:.6e},{2750.0 / 4:.6e}" in ansys
-    abaqus = to_abaqus(els)
-    assert "*SPRING, ELSET=GF_K30001\n2, 2\n2.575000e+08" in abaqus
-    assert "*DASHPOT, ELSET=GF_C30005\n1, 1\n3.886250e+02" in abaqus
+def test_explained_joint_keeps_contact_effects_and_drops_the_rig():
+    explanation = {"verdict": "explained", "guide": "MRB35", "effects": [
+        {"name": "contact_stiffness", "parameters": {"factor": {"value": 0.81, "std": 0.01}}},
+        {"name": "support_compliance", "variant": "lateral",
+         "parameters": {"lateral_n_per_m": {"value": 1.2e8, "std": 1e6}}},
+        {"name": "added_mass", "parameters": {"mass_kg": {"value": 0.1}, "at": {"value": "ABCD"}}}]}
+    joint = explained_joint(RESULT, explanation)
+    assert _rel(joint.stiffness, 0.81 * _nominal_k6()) < 1e-12
+    assert [r.split(" ")[0] for r in joint.removed] == ["support_compliance", "added_mass"]
+    assert joint.kept[0].startswith("contact_stiffness")
 
 
-def test_cli_export_two_carriages(results_file, tmp_path):
-    out = tmp_path / "joints.bdf"
-    result = CliRunner().invoke(main, ["export", str(results_file), "--format", "nastran", "-o", str(out)])
-    assert result.exit_code == 0, result.output
-    assert out.read_text().count("CBUSH") == 24
-    js = CliRunner().invoke(main, ["export", str(results_file)])
-    assert len(json.loads(js.output)) == 24
+def test_paper_like_recording_exports_the_contact_stiffness(tmp_path):
+    """The paper's case end to end: identify + explain (soft lateral support, sensor mass) -> joint without them."""
+    from guidefit.explain import explain
+    from guidefit.identify import identify
+
+    ident = identify(PAPER_LIKE)
+    results = _write(tmp_path, "r.jsonl", [ident.to_dict()])
+    expl = _write(tmp_path, "e.json", [explain(ident).to_dict()])
+    code, out = _run(results, "--explain", expl, "--format", "json")
+    assert code == 0, out
+    doc = json.loads(out)
+    joint = doc["joints"][0]
+    assert joint["apparent_eq24_29_si"]["K_H_n_per_m"] == pytest.approx(1.0e8, rel=0.02)
+    assert {r.split(" ")[0] for r in joint["explained_joint_si"]["rig_effects_removed"]} == {
+        "support_compliance", "added_mass"}
+    assert _rel(np.array(joint["stiffness_si_model_axes"]), _nominal_k6()) < 1e-3  # truth: nominal contacts
+    assert np.array(doc["elements"][0]["stiffness"])[0, 0] == pytest.approx(1.0817e9, rel=1e-3)
 
 
-def test_missing_parameter_is_bad_input(tmp_path):
+def test_unexplained_is_refused_with_one_line(tmp_path):
+    results = _write(tmp_path, "r.jsonl", [RESULT])
+    expl = _write(tmp_path, "e.json", [{"file": "carriage1.h5", "verdict": "unexplained", "effects": []}])
+    code, out = _run(results, "--explain", expl)
+    assert code == 1 and "--joint apparent" in out and len(out.strip().splitlines()) == 1
+    code, out = _run(results, "--joint", "apparent")
+    assert code == 0
+
+
+# --------------------------------------------------------------------------- decks read back
+
+
+@pytest.mark.parametrize("units", ["si", "mm-N-s", "mm-t-s"])
+def test_nastran_dmig_round_trip_and_units(tmp_path, units):
+    pytest.importorskip("pyNastran")
+    results = _write(tmp_path, "r.jsonl", [RESULT])
+    expl = _write(tmp_path, "e.json", [ADEQUATE])
+    code, out = _run(results, "--explain", expl, "--format", "nastran", "--units", units,
+                     "--carriage-node", "501", "--rail-node", "502")
+    assert code == 0, out
+    model = _bdf(out, tmp_path)
+    dofs = [(501, c) for c in range(1, 7)] + [(502, c) for c in range(1, 7)]
+    k12 = _dmig_matrix(model.dmig["GFJK"], dofs)
+    joint = explained_joint(RESULT, ADEQUATE)
+    s = 1.0 if units == "si" else 1e3
+    factor = np.array([1, 1, 1, s, s, s])[:, None] / np.array([s, s, s, 1, 1, 1])[None, :]
+    k = joint.stiffness * factor
+    assert _rel(k12[:6, :6], k) < 1e-12 and _rel(k12[6:, 6:], k) < 1e-12 and _rel(-k12[:6, 6:], k) < 1e-12
+    if units != "si":  # N/mm, N mm/rad, N/rad: hand-checked factors
+        assert k12[0, 0] == pytest.approx(joint.stiffness[0, 0] / 1e3, rel=1e-12)
+        assert k12[5, 5] == pytest.approx(joint.stiffness[5, 5] * 1e3, rel=1e-12)
+        assert k12[0, 5] == pytest.approx(joint.stiffness[0, 5], rel=1e-12)
+    b12 = _dmig_matrix(model.dmig["GFJB"], dofs)
+    assert _rel(b12[:6, :6], joint.damping * factor) < 1e-12
+
+
+def test_nastran_cbush_full_precision_and_axis_map(tmp_path):
+    pytest.importorskip("pyNastran")
+    joint = apparent_joint({"parameters": {"K_V": {"value": 2.7041234567891e8}, "K_H": {"value": 1.2345678901234e8},
+                                           "c_V": {"value": 2750.123456789}, "c_H": {"value": 3109.98765432}}})
+    rot = parse_axis_map("x=X,y=Z,z=-Y")
+    els = build_elements([joint], "bush", axis_map=rot)
+    text = to_nastran([joint], els, element="bush")
+    assert "2.704+8" not in text
+    prop = _bdf(text, tmp_path).properties[30001]
+    # model vertical y -> machine Z (K3), lateral x -> machine X (K1)
+    assert prop.Ki[2] == pytest.approx(2.7041234567891e8, rel=1e-12)
+    assert prop.Ki[0] == pytest.approx(1.2345678901234e8, rel=1e-12)
+    assert prop.Bi[2] == pytest.approx(2750.123456789, rel=1e-12)
+
+
+def test_axis_map_rotates_the_full_matrix_and_rejects_mirrors():
+    joint = explained_joint(RESULT, ADEQUATE)
+    rot = parse_axis_map("x=Y,y=Z,z=X")
+    k = build_elements([joint], "matrix", axis_map=rot)[0].stiffness
+    t = np.zeros((6, 6))
+    t[:3, :3] = t[3:, 3:] = rot
+    assert _rel(k, t @ joint.stiffness @ t.T) < 1e-14
+    assert k[2, 2] == pytest.approx(joint.stiffness[1, 1], rel=1e-14)  # vertical is machine Z
+    assert k[1, 5] == pytest.approx(joint.stiffness[0, 4], rel=1e-14)  # u-phi coupling moved with its axes
+    code, out = _run("nonexistent.json", "--axis-map", "x=X,y=Y,z=-Z")
+    assert code == 2 and "mirror" in out
+
+
+def test_nastran_real_fields_keep_13_digits():
+    rng = np.random.default_rng(1)
+    for x in np.concatenate([10 ** rng.uniform(-3, 13, 300), -(10 ** rng.uniform(-2, 13, 300))]):
+        text = _nastran_real(x)
+        assert len(text) == 16
+        assert abs(_nastran_float(text) - x) <= 1e-12 * abs(x), text
+    def worst(lo, hi):
+        return max(abs(_nastran_float(_nastran_real(-x)) + x) / x for x in 10 ** rng.uniform(lo, hi, 300))
+
+    assert worst(-9, -3) <= 5e-12 and worst(-99, -9) <= 5e-11  # negative and tiny: 12, then 11 digits (documented)
+
+
+def test_ansys_matrix27_and_abaqus_connector_round_trip(tmp_path):
+    results = _write(tmp_path, "r.jsonl", [RESULT])
+    expl = _write(tmp_path, "e.json", [ADEQUATE])
+    joint = explained_joint(RESULT, ADEQUATE)
+    code, ansys = _run(results, "--explain", expl, "--format", "ansys")
+    assert code == 0, ansys
+    consts, current = {}, None
+    for line in ansys.splitlines():
+        if line.startswith("R,"):
+            parts = line.split(",")
+            current = int(parts[1])
+            consts[current] = [float(v) for v in parts[2:]]
+        elif line.startswith("RMORE,"):
+            consts[current] += [float(v) for v in line.split(",")[1:]]
+    assert sorted(consts) == [30001, 30002] and all(len(v) == 78 for v in consts.values())
+    upper = iter(consts[30001])
+    k12 = np.zeros((12, 12))
+    for r in range(12):
+        for c in range(r, 12):
+            k12[r, c] = k12[c, r] = next(upper)
+    assert _rel(k12[:6, :6], joint.stiffness) < 1e-15 and _rel(-k12[6:, :6], joint.stiffness) < 1e-15
+    code, abaqus = _run(results, "--explain", expl, "--format", "abaqus")
+    lines = abaqus.splitlines()
+    start = lines.index("*CONNECTOR ELASTICITY") + 1
+    values = [float(v) for line in lines[start:start + 3] for v in line.split(",")]
+    k = np.zeros((6, 6))
+    it = iter(values)
+    for c in range(6):
+        for r in range(c + 1):
+            k[r, c] = k[c, r] = next(it)
+    assert _rel(k, joint.stiffness) < 1e-15
+
+
+# --------------------------------------------------------------------------- hostile input
+
+
+def test_file_name_cannot_inject_cards(tmp_path):
+    pytest.importorskip("pyNastran")
+    evil = dict(RESULT, file="x.h5\nGRID,1,,0.,0.,0.\nCBUSH   99      99      1       2\nENDDATA\r\u2028$")
+    results = _write(tmp_path, "r.jsonl", [evil])
+    for fmt, starts in (("nastran", ("GRID", "CBUSH  ", "ENDDATA")), ("ansys", ("GRID", "N,", "FINISH")),
+                        ("abaqus", ("GRID", "*NODE", "ENDDATA"))):
+        code, out = _run(results, "--joint", "apparent", "--format", fmt)
+        assert code == 0, out
+        assert not any(line.startswith(starts) for line in out.splitlines()), fmt
+        assert "x.h5?GRID,1,,0.,0.,0.?CBUSH" in out
+    code, out = _run(results, "--joint", "apparent", "--format", "nastran", "--element", "bush")
+    model = _bdf(out, tmp_path)
+    assert not model.nodes and len(model.elements) == 1
+
+
+@pytest.mark.parametrize("bad", ["Infinity", "-Infinity", "NaN", "1e999"])
+def test_non_finite_values_are_one_line_errors(tmp_path, bad):
+    path = tmp_path / "r.json"
+    path.write_text(json.dumps(RESULT).replace("1030000000.0", bad))
+    for fmt in ("nastran", "ansys", "abaqus", "json"):
+        code, out = _run(path, "--joint", "apparent", "--format", fmt)
+        assert code == 2 and "not a finite number" in out and len(out.strip().splitlines()) == 1
+        assert "INF" not in out.upper().replace("INFINITY", "").replace("INF ", "")
+
+
+def test_id_overflow_and_repeats_are_refused(results_file):
+    code, out = _run(results_file, "--joint", "apparent", "--element", "springs", "--vertical", "60",
+                     "--horizontal", "60")
+    assert code == 2 and "would repeat" in out
+    code, out = _run(results_file, "--joint", "apparent", "--format", "nastran", "--first-element", "99999950")
+    assert code == 2 and "outside 1..99999999" in out
+    code, out = _run(results_file, "--joint", "apparent", "--format", "nastran", "--carriage-node", "5,100000000")
+    assert code == 2 and "100000000" in out
+    code, out = _run(results_file, "--joint", "apparent", "--carriage-node", "5")
+    assert code == 2 and "one per carriage" in out
+    code, out = _run(results_file, "--joint", "apparent", "--element", "springs", "--format", "json")
+    assert code == 0
+    ids = [e["element_id"] for e in json.loads(out)["elements"]]
+    assert len(ids) == len(set(ids)) == 24
+
+
+def test_missing_parameter_and_bad_json_are_bad_input(tmp_path):
     bad = json.loads(json.dumps(RESULT))
     bad["parameters"]["K_H"]["value"] = None
-    path = tmp_path / "r.json"
-    path.write_text(json.dumps(bad))
-    with pytest.raises(RecordingError, match="K_H' was not identified"):
-        joint_elements(read_results(path), where=str(path))
-    result = CliRunner().invoke(main, ["export", str(path)])
-    assert result.exit_code == 2 and "K_H" in result.output
-
-
-def test_not_json(tmp_path):
-    path = tmp_path / "r.json"
-    path.write_text("{nope\n")
-    with pytest.raises(RecordingError, match="line 1: not JSON"):
-        read_results(path)
+    path = _write(tmp_path, "r.json", [bad])
+    code, out = _run(path, "--joint", "apparent")
+    assert code == 2 and "K_H' was not identified" in out
+    nope = tmp_path / "n.json"
+    nope.write_text("{nope\n")
+    code, out = _run(nope)
+    assert code == 2 and "line 1: not JSON" in out
+    assert read_results(_write(tmp_path, "l.json", [[RESULT]]))[0]["file"] == "carriage1.h5"
