@@ -174,6 +174,33 @@ _fft_precision_option = click.option(
     help="Precision the FFTs compute in; auto: that of the stored samples (float32 files: single).")
 
 
+def _identify_options(func):
+    """The identify options that change numbers, shared by identify, explain and report."""
+    func = _fft_precision_option(func)
+    func = click.option("--no-jackknife", is_flag=True,
+                        help="Skip the hit-group jackknife (faster, fit std only).")(func)
+    return click.option("--estimator", type=click.Choice(["H1", "H2", "Hv"]), default="H1", show_default=True)(func)
+
+
+def _identify_settings(estimator="H1", no_jackknife=False, fft_precision="auto", **extra):
+    from guidefit.identify import IdentifySettings
+
+    return IdentifySettings(estimator=estimator, jackknife=not no_jackknife, fft_precision=fft_precision, **extra)
+
+
+def _candidate_names(candidates: str | None):
+    """``--candidates a,b`` -> ["a", "b"] (checked against the effect library), None for all."""
+    names = [c.strip() for c in candidates.split(",")] if candidates else None
+    if names:
+        from guidefit.model.effects import EFFECTS
+
+        unknown = [n for n in names if n not in EFFECTS]
+        if unknown:
+            raise click.BadParameter(f"unknown effect '{unknown[0]}'; have {', '.join(EFFECTS)}",
+                                     param_hint="--candidates")
+    return names
+
+
 @main.command(name="identify")
 @click.argument("files", nargs=-1, required=True, type=click.Path())
 @click.option("--guide", "guide_name", help="Guide name or TOML (default: the file's guide attribute, else MRB35).")
@@ -353,27 +380,23 @@ def frf_cmd(recording, estimator, window_text, out_path, fft_precision):
 @click.option("--json", "as_json", is_flag=True, help="Print the result as one JSON object.")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False),
               help="PNG: measured vs model frequencies (and FRFs) before and after.")
-def explain_cmd(recording, modes_path, guide_name, candidates, as_json, plot_path):
+@_identify_options
+def explain_cmd(recording, modes_path, guide_name, candidates, as_json, plot_path, estimator, no_jackknife,
+                fft_precision):
     """Trace the model-measurement residual to a physical effect; error before and after."""
     from guidefit import report
     from guidefit.explain import explain
 
     if (recording is None) == (modes_path is None):
         raise click.UsageError("give a RECORDING or --modes FILE (one of them)")
-    names = [c.strip() for c in candidates.split(",")] if candidates else None
-    if names:
-        from guidefit.model.effects import EFFECTS
-
-        unknown = [n for n in names if n not in EFFECTS]
-        if unknown:
-            raise click.BadParameter(f"unknown effect '{unknown[0]}'; have {', '.join(EFFECTS)}",
-                                     param_hint="--candidates")
+    names = _candidate_names(candidates)
+    settings = _identify_settings(estimator, no_jackknife, fft_precision)
     source = modes_path or recording
     from guidefit.errors import GuideError
 
     with report.spinner("explaining", enabled=not as_json) as progress:
         try:
-            result = explain(source, guide=guide_name, candidates=names, progress=progress)
+            result = explain(source, guide=guide_name, candidates=names, progress=progress, settings=settings)
         except GuideError as exc:
             if guide_name is not None:
                 raise
@@ -446,11 +469,17 @@ def export_cmd(results, fmt, joint, explain_paths, guide_name, element, units, a
 @click.option("-o", "--out", "out_path", required=True, type=click.Path(dir_okay=False),
               help="HTML file to write (self-contained, plots embedded).")
 @click.option("--guide", "guide_name", help="Guide name or TOML (default: the file's guide attribute).")
-def report_cmd(recording, out_path, guide_name):
-    """One self-contained HTML report: FRFs, coherence, modes, parameters, hits, explanation."""
+@click.option("--candidates", help="explain: comma-separated effect names to try (default: the whole library).")
+@_identify_options
+def report_cmd(recording, out_path, guide_name, candidates, estimator, no_jackknife, fft_precision):
+    """One self-contained HTML report of the identify and explain results (the same calls, same settings)."""
+    from guidefit import report
     from guidefit.html_report import write_report
 
-    write_report(recording, out_path, guide=guide_name)
+    settings = _identify_settings(estimator, no_jackknife, fft_precision)
+    with report.spinner("identifying and explaining") as progress:
+        write_report(recording, out_path, guide=guide_name, settings=settings,
+                     candidates=_candidate_names(candidates), progress=progress)
     click.echo(f"report written to {out_path}")
 
 

@@ -2017,7 +2017,7 @@ def explain_identification(identification, candidates=None, progress=None) -> Ex
                          progress=progress, source=where, notes=notes)
 
 
-def explain(source, guide=None, candidates=None, progress=None) -> Explanation:
+def explain(source, guide=None, candidates=None, progress=None, settings=None) -> Explanation:
     """Explain a recording (identified first), a modes JSON file or an Identification.
 
     Parameters
@@ -2027,6 +2027,9 @@ def explain(source, guide=None, candidates=None, progress=None) -> Explanation:
         (:func:`read_modes_json`), or an identification result.
     guide : str or Guide, optional
         Overrides the guide named by the source (default MRB35).
+    settings : IdentifySettings, optional
+        How a recording is identified (estimator, windows, ...); force levels
+        are always on. ``guidefit report`` passes the same settings.
     """
     from guidefit.model.guides import load_guide
 
@@ -2039,11 +2042,18 @@ def explain(source, guide=None, candidates=None, progress=None) -> Explanation:
         g = g if not isinstance(g, str | Path) else load_guide(g)
         return explain_modes(modes, g, sensors, levels, candidates=candidates, progress=progress,
                              source=str(path))
+    ident = identify_for_explain(path, guide=guide, settings=settings)
+    return explain_identification(ident, candidates, progress)
+
+
+def identify_for_explain(path, guide=None, settings=None):
+    """The identification ``explain`` starts from: :func:`~guidefit.identify.identify` with force levels on."""
+    from dataclasses import replace
+
     from guidefit.identify import IdentifySettings, identify
 
     # force levels feed the amplitude_dependence candidate
-    ident = identify(path, guide=guide, settings=IdentifySettings(force_levels=True))
-    return explain_identification(ident, candidates, progress)
+    return identify(path, guide=guide, settings=replace(settings or IdentifySettings(), force_levels=True))
 
 
 def fitted_spec(explanation: Explanation, guide=None):

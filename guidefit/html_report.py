@@ -1,119 +1,467 @@
-"""``guidefit report``: one self-contained HTML file per recording.
+"""``guidefit report``: one self-contained HTML file per recording, rendered from one pipeline.
 
-The page holds the FRF, phase and coherence plots (PNG embedded as base64,
-so the file travels alone), the picked modes, the joint parameters with
-their uncertainties, the hit table with every rejected hit and its reason,
-and the result of ``explain``. No external CSS, fonts or scripts.
+The report computes nothing of its own. :func:`report_results` makes the
+calls ``guidefit explain RECORDING`` makes, with the same settings:
+:func:`guidefit.explain.identify_for_explain` (``identify`` with force levels
+on; its parameters and modes are those of ``identify --json`` with the same
+options, force levels only add data) and :func:`guidefit.explain.explain` of
+that identification. The page then renders those two results:
+
+- provenance: date (UTC), guidefit version, the input file's SHA-256 and
+  size, the guide, every setting (identify and explain) and the equivalent
+  command lines;
+- the runs and the sensors with their positions and directions;
+- the joint parameters with uncertainties;
+- the ``identify --plot`` figure (:func:`guidefit.report.plot_identification`:
+  FRFs, fitted model, stabilisation diagram where the estimator has one);
+- the modes, and their shapes at the sensors (points A-D) as a table and a
+  figure of the measured modal constants;
+- the explain result: verdict, RMS error before and after, the effects, the
+  per-mode table, the ranked candidates and the explain figure (its FRF panel
+  uses the identification's FRF and its identified damping ratios);
+- every hit with its reason if rejected, and the warnings.
+
+The results themselves are embedded as JSON (``<script type="application/json"
+id="guidefit-results">``, the ``identify --json`` and ``explain --json``
+objects) so that a reader or a test can compare them with the commands'
+output. Every text from the input (file name, description, channel names,
+warnings) is HTML-escaped; images are PNG data URIs: no external CSS,
+fonts or scripts.
 """
 
 from __future__ import annotations
 
 import base64
+import hashlib
 import html
 import io
+import json
+from dataclasses import dataclass
 
 _STYLE = """
-body{font-family:system-ui,sans-serif;margin:2em;max-width:1100px;color:#222}
+body{font-family:system-ui,sans-serif;margin:2em;max-width:1150px;color:#222}
 table{border-collapse:collapse;margin:1em 0}th,td{border:1px solid #bbb;padding:3px 8px;text-align:right}
 th{background:#eee}td:first-child,th:first-child{text-align:left}.warn{color:#a60}.bad{color:#b00}
-img{max-width:100%;border:1px solid #ddd}
+img{max-width:100%;border:1px solid #ddd}code{background:#f4f4f4;padding:1px 4px}
+.meta td{text-align:left}
 """
 
 
-def _png(fig) -> str:
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=90)
-    return base64.b64encode(buffer.getvalue()).decode("ascii")
+@dataclass(frozen=True)
+class ReportResults:
+    """What a report renders: the identification and explanation, and how they were made."""
+
+    path: str
+    identification: object  # guidefit.identify.Identification
+    explanation: object | None  # guidefit.explain.Explanation
+    explain_error: str | None
+    settings: object  # guidefit.identify.IdentifySettings
+    candidates: tuple | None
+    guide_option: str | None
 
 
-def _table(header: list[str], rows: list[list], cls: list[str] | None = None) -> str:
-    head = "".join(f"<th>{html.escape(h)}</th>" for h in header)
+def file_sha256(path) -> str:
+    """SHA-256 of a file, read in 1 MiB blocks.
+
+    >>> import tempfile, os
+    >>> with tempfile.NamedTemporaryFile(delete=False) as fh:
+    ...     _ = fh.write(b"abc")
+    >>> file_sha256(fh.name)[:16]
+    'ba7816bf8f01cfea'
+    >>> os.remove(fh.name)
+    """
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def report_results(path, *, guide=None, settings=None, candidates=None, progress=None) -> ReportResults:
+    """Identify and explain ``path`` exactly as ``guidefit explain`` does (same functions, same settings).
+
+    A failed explanation (no usable modes for it, a model error) is kept as
+    its one-line message; a failed identification raises as in ``identify``.
+    """
+    from dataclasses import replace
+
+    from guidefit.errors import GuidefitError
+    from guidefit.explain import explain, identify_for_explain
+    from guidefit.identify import IdentifySettings
+
+    settings = settings or IdentifySettings()
+    ident = identify_for_explain(path, guide=guide, settings=settings)
+    explanation, error = None, None
+    try:
+        explanation = explain(ident, candidates=candidates, progress=progress)
+    except GuidefitError as exc:
+        error = str(exc)
+    return ReportResults(str(path), ident, explanation, error, replace(settings, force_levels=True),
+                         None if candidates is None else tuple(candidates), None if guide is None else str(guide))
+
+
+# --------------------------------------------------------------------------- pieces
+
+
+def _e(text) -> str:
+    return html.escape(str(text), quote=True)
+
+
+def _table(header: list[str], rows: list[list], cls: list[str] | None = None, table_cls: str = "") -> str:
+    head = f"<tr>{''.join(f'<th>{_e(h)}</th>' for h in header)}</tr>" if header else ""
     body = []
     for i, row in enumerate(rows):
         attr = f' class="{cls[i]}"' if cls and cls[i] else ""
-        body.append(f"<tr{attr}>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in row) + "</tr>")
-    return f"<table><tr>{head}</tr>{''.join(body)}</table>"
+        body.append(f"<tr{attr}>" + "".join(f"<td>{_e(c)}</td>" for c in row) + "</tr>")
+    attr = f' class="{table_cls}"' if table_cls else ""
+    return f"<table{attr}>{head}{''.join(body)}</table>"
 
 
-def render_html(identification, explanation=None, explain_error: str | None = None) -> str:
-    """The HTML text for an :class:`~guidefit.identify.Identification` (and optional explanation)."""
+def _img(png: bytes, alt: str) -> str:
+    return f"<img alt='{_e(alt)}' src='data:image/png;base64,{base64.b64encode(png).decode('ascii')}'>"
+
+
+def _figure_png(draw) -> bytes:
+    """PNG bytes of a figure drawn by ``draw(path_or_buffer)`` (the functions the commands use)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    buffer = io.BytesIO()
+    try:
+        draw(buffer)
+    finally:
+        plt.close("all")
+    return buffer.getvalue()
+
+
+def _json_script(obj) -> str:
+    """Embedded JSON that no file name can close: <, >, & escaped as JSON unicode escapes."""
+    from guidefit.report import dump_json
+
+    text = dump_json(obj).replace("<", "\\u003c").replace(">", "\\u003e").replace("&", "\\u0026")
+    return f"<script type='application/json' id='guidefit-results'>{text}</script>"
+
+
+def _settings_rows(res: ReportResults) -> list[list]:
+    from dataclasses import fields
+
+    s = res.settings
+    rows = [[f"identify {f.name}", "auto" if getattr(s, f.name) is None else repr(getattr(s, f.name))]
+            for f in fields(s)]
+    rows.append(["guide (option)", res.guide_option or "(the file's, else MRB35)"])
+    rows.append(["explain candidates", ", ".join(res.candidates) if res.candidates else "(the whole library)"])
+    if res.explanation is not None:
+        for key, value in res.explanation.settings.items():
+            rows.append([f"explain {key}", value])
+    return rows
+
+
+def _command_lines(res: ReportResults) -> list[str]:
+    import shlex
+
+    opts = []
+    if res.guide_option:
+        opts += ["--guide", res.guide_option]
+    opts += ["--estimator", res.settings.estimator, "--fft-precision", res.settings.fft_precision]
+    if not res.settings.jackknife:
+        opts.append("--no-jackknife")
+    path = shlex.quote(res.path)
+    explain_opts = opts + (["--candidates", ",".join(res.candidates)] if res.candidates else [])
+    return [f"guidefit identify {path} --json {' '.join(map(shlex.quote, opts))}",
+            f"guidefit explain {path} --json {' '.join(map(shlex.quote, explain_opts))}"]
+
+
+def _header(res: ReportResults) -> list[str]:
+    import datetime
+    import os
+
+    from guidefit import __version__
+    from guidefit.recording import read_recording
+
+    ident = res.identification
+    rec = read_recording(res.path)
+    now = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
+    meta = [["file", res.path], ["SHA-256", file_sha256(res.path)], ["size", f"{os.path.getsize(res.path)} bytes"],
+            ["description", rec.description or "-"], ["guide", f"{ident.guide.name} (M = {ident.guide.mass_kg:g} kg)"],
+            ["date", now], ["guidefit", __version__]]
+    parts = [f"<h1>guidefit report: {_e(res.path)}</h1>", "<h2>Provenance</h2>",
+             _table([], meta, table_cls="meta"),
+             "<p>The same results as these commands (the report runs their calls with these settings):</p>",
+             "<ul>" + "".join(f"<li><code>{_e(c)}</code></li>" for c in _command_lines(res)) + "</ul>",
+             "<h2>Settings</h2>", _table(["setting", "value"], _settings_rows(res), table_cls="meta")]
+    runs = [[r.name, f"{r.sample_rate_hz:g}", " ".join(f"{x:g}" for x in r.excitation_direction),
+             "-" if r.excitation_position_m is None else " ".join(f"{1e3 * x:g}" for x in r.excitation_position_m),
+             r.layout, r.n_hits_stored or "-"] for r in rec.runs]
+    parts += ["<h2>Runs and sensors</h2>",
+              _table(["run", "sample rate (Hz)", "excitation direction", "hit point (mm)", "layout", "stored hits"],
+                     runs)]
+    sensors = [[ch.name, ch.unit, *(f"{1e3 * x:.2f}" for x in ch.position_m), " ".join(f"{x:g}" for x in ch.direction)]
+               for r in rec.runs for ch in r.channels]
+    seen, unique = set(), []
+    for row in sensors:
+        if tuple(row) not in seen:
+            seen.add(tuple(row))
+            unique.append(row)
+    parts.append(_table(["channel", "unit", "x (mm)", "y (mm)", "z (mm)", "direction"], unique))
+    return parts
+
+
+def _parameters_and_modes(res: ReportResults) -> list[str]:
     from guidefit.report import fmt, plot_identification, significant_digits
 
-    result = identification
-    buffer = io.BytesIO()
-    plot_identification(result, buffer)
-    frf_png = base64.b64encode(buffer.getvalue()).decode("ascii")
-    plt.close("all")
-    parts = [f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>guidefit report: "
-             f"{html.escape(result.file)}</title><style>{_STYLE}</style></head><body>",
-             f"<h1>guidefit report</h1><p>file <b>{html.escape(result.file)}</b>, guide "
-             f"<b>{html.escape(result.guide.name)}</b> (M = {result.guide.mass_kg:g} kg)</p>",
-             "<h2>Joint parameters</h2>"]
+    ident = res.identification
     rows = [[name, fmt(p["value"], p["unit"], significant_digits(p["value"], p["std"])), fmt(p["std"], p["unit"], 2)]
-            for name, p in result.parameters.items()]
-    parts.append(_table(["parameter", "value", "std (1 sigma)"], rows))
-    parts.append("<p>f: undamped natural frequency |p|/2&pi; of the modal curve fit; zeta: viscous damping ratio "
-                 "after the exponential-window correction; K, c: Eq. (24)-(29).</p>")
-    parts.append("<h2>FRFs and coherence</h2>")
-    parts.append(f"<img alt='FRF magnitude, phase and coherence per run' src='data:image/png;base64,{frf_png}'>")
-    parts.append("<h2>Modes</h2>")
+            for name, p in ident.parameters.items()]
+    parts = ["<h2>Joint parameters (Eq. 24-29, apparent)</h2>", _table(["parameter", "value", "std (1 sigma)"], rows),
+             "<p>f: undamped natural frequency |p|/2&pi; of the modal fit; zeta: viscous damping ratio after the "
+             "exponential-window correction; K, c: Eq. (24)-(29) with the guide's mass (apparent single-DOF "
+             "values: rig effects such as sensor mass or a soft support are in them; see the explanation).</p>",
+             "<h2>FRFs and fitted modes</h2><p>The <code>identify --plot</code> figure.</p>",
+             _img(_figure_png(lambda buf: plot_identification(ident, buf)), "identify --plot figure")]
     mode_rows = []
-    for m in list(result.modes) + list(result.extra_modes):
+    for m in list(ident.modes) + list(ident.extra_modes):
         hp = m.half_power
-        mode_rows.append([m.label, m.run, fmt(m.frequency_hz, "Hz", significant_digits(m.frequency_hz, m.frequency_std_hz)),
-                          fmt(m.frequency_std_hz, "Hz", 2),
-                          f"{m.damping_ratio:.4f}", fmt(m.model_frequency_hz, "Hz"), f"{m.coherence:.3f}",
+        mode_rows.append([m.label, m.run, fmt(m.frequency_hz, "Hz", significant_digits(m.frequency_hz,
+                                                                                       m.frequency_std_hz)),
+                          fmt(m.frequency_std_hz, "Hz", 2), f"{m.damping_ratio:.4f}", fmt(m.damping_std, "", 2),
+                          fmt(m.model_frequency_hz, "Hz"), f"{m.coherence:.3f}",
                           "-" if hp is None else f"{hp['zeta_window_corrected']:.4f}"])
-    parts.append(_table(["label", "run", "f_n", "std", "zeta", "model", "coherence", "half-power zeta"], mode_rows))
-    hits = result.hit_rows()  # runs that gave no FRF included
-    parts.append(f"<h2>Hits</h2><p>{sum(h['accepted'] for h in hits)} accepted, "
-                 f"{sum(not h['accepted'] for h in hits)} rejected</p>")
-    parts.append(_table(["run", "hit", "peak force (N)", "accepted", "reason"],
-                        [[h["run"], h["hit"], fmt(h["peak_force_n"]), "yes" if h["accepted"] else "no",
-                          h["reason"] or ""] for h in hits],
-                        ["" if h["accepted"] else "bad" for h in hits]))
-    if result.warnings:
+    parts += ["<h2>Modes</h2>",
+              _table(["label", "run", "f_n", "std", "zeta", "zeta std", "model", "coherence", "half-power zeta"],
+                     mode_rows)]
+    if ident.missing_modes:
+        parts.append(f"<p class='warn'>model modes not observed: {_e(', '.join(map(str, ident.missing_modes)))}</p>")
+    return parts
+
+
+def _shapes(res: ReportResults) -> list[str]:
+    """Mode shapes at the sensors (A-D): the real modal constants per channel, table and figure."""
+    ident = res.identification
+    modes = list(ident.modes) + list(ident.extra_modes)
+    channels = []
+    for m in modes:
+        for name in m.shape:
+            if name not in channels:
+                channels.append(name)
+    rows = []
+    for m in modes:
+        values = [float(getattr(m.shape.get(c), "real", m.shape.get(c))) if c in m.shape else None for c in channels]
+        rows.append([f"{m.label} ({m.run}, {m.frequency_hz:.1f} Hz)",
+                     *("-" if v is None else f"{v:.4g}" for v in values)])
+    parts = ["<h2>Mode shapes at the measuring points</h2>",
+             "<p>Real modal constants (1/kg) per channel, from the modal fit of the run that gave the mode; "
+             "the figure draws each sensor's value as an arrow along its direction at its position (each mode "
+             "scaled to its largest value).</p>",
+             _table(["mode", *channels], rows)]
+    if modes:
+        parts.append(_img(_figure_png(lambda buf: plot_shapes(ident, buf)), "mode shapes at the sensors"))
+    return parts
+
+
+def plot_shapes(identification, path) -> None:
+    """One 3-D panel per mode: the sensors' modal constants as arrows along their directions at A-D."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    modes = list(identification.modes) + list(identification.extra_modes)
+    sensors = {}
+    for run in identification.runs:
+        for ch in run.channels:
+            sensors.setdefault(ch.name, (np.asarray(ch.position_m, float), np.asarray(ch.direction, float)))
+    n = len(modes)
+    cols = min(n, 3)
+    rows = -(-n // cols)
+    fig = plt.figure(figsize=(4.2 * cols, 3.8 * rows))
+    pts = np.array([p for p, _ in sensors.values()]) if sensors else np.zeros((1, 3))
+    span = max(float(np.ptp(pts[:, 0])), float(np.ptp(pts[:, 2])), 0.02)
+    for k, m in enumerate(modes):
+        ax = fig.add_subplot(rows, cols, k + 1, projection="3d")
+        values = {c: float(np.real(v)) for c, v in m.shape.items() if c in sensors}
+        scale = 0.4 * span / max((abs(v) for v in values.values()), default=1.0) if values else 1.0
+        corners = {}
+        for c, (p, _) in sensors.items():
+            corners.setdefault(c.split("_")[1] if c.count("_") >= 2 else c, p)
+        outline = np.array(list(corners.values()))
+        if len(outline) >= 3:
+            order = np.argsort(np.arctan2(outline[:, 2], outline[:, 0]))
+            loop = outline[np.r_[order, order[:1]]]
+            ax.plot(loop[:, 0], loop[:, 2], loop[:, 1], color="0.6", lw=1)
+        for name, p in corners.items():
+            ax.text(p[0], p[2], p[1], f" {name}", fontsize=8)
+        for c, v in values.items():
+            p, d = sensors[c]
+            vec = d * v * scale
+            ax.quiver(p[0], p[2], p[1], vec[0], vec[2], vec[1], color="tab:red" if v >= 0 else "tab:blue",
+                      arrow_length_ratio=0.25)
+        ax.set_title(f"{m.label} ({m.run}) {m.frequency_hz:.1f} Hz", fontsize=9)
+        ax.set_xlabel("x (m)", fontsize=7)
+        ax.set_ylabel("z (m)", fontsize=7)
+        ax.set_zlabel("y (m)", fontsize=7)
+        ax.tick_params(labelsize=6)
+        lim = 0.8 * span
+        ax.set_xlim(-lim, lim)
+        ax.set_ylim(-lim, lim)
+        ax.set_zlim(-lim, lim)
+    fig.tight_layout()
+    fig.savefig(path, format="png", dpi=90)
+    plt.close(fig)
+
+
+def _overlay(res: ReportResults) -> dict | None:
+    """The explain figure's FRF panel from the identification itself: no FRF is recomputed.
+
+    The measured FRF is the first run's channel with the largest response;
+    the model before and after uses the identified damping ratio of each
+    labelled mode (the mean of them for modes not identified).
+    """
+    import numpy as np
+
+    from guidefit.explain import fitted_spec
+    from guidefit.model import vibration as vib
+    from guidefit.recording import read_recording
+
+    ident, explanation = res.identification, res.explanation
+    run = ident.runs[0]
+    frf = run.frf
+    k = int(np.argmax(np.max(np.abs(frf.H), axis=0)))
+    ch = run.channels[k]
+    rec_run = read_recording(res.path).run(run.name)
+    hit = rec_run.excitation_position_m if rec_run.excitation_position_m is not None else np.zeros(3)
+    zeta = {m.label: m.damping_ratio for m in ident.modes}
+    fill = float(np.mean(list(zeta.values()))) if zeta else 0.02
+    f = frf.frequency_hz
+    top = min(f[-1], 1.4 * max((m.frequency_hz for m in ident.modes), default=f[-1]))
+    band = (f > 0) & (f <= top)
+
+    def model(spec):
+        sol = vib.solve_modes(spec)
+        z = [zeta.get(lab, fill) for lab in sol.labels]
+        return vib.accelerance(sol, spec, f[band], z, hit, run.excitation_direction, [ch.position_m],
+                               [ch.direction])[:, 0]
+
+    out = {"frequency_hz": f[band], "measured": frf.H[band, k],
+           "before": model(vib.model_from_guide(ident.guide)),
+           "title": f"run '{run.name}', {ch.name} (identified damping)"}
+    if explanation.verdict == "explained":
+        out["after"] = model(fitted_spec(explanation, ident.guide))
+    return out
+
+
+def _explanation(res: ReportResults) -> list[str]:
+    from guidefit.explain import plot_explanation
+    from guidefit.report import fmt
+
+    parts = ["<h2>Explanation of the model-measurement residual</h2>"]
+    if res.explanation is None:
+        return parts + [f"<p class='warn'>explain gave no result: {_e(res.explain_error or 'no result')}</p>"]
+    data = res.explanation.to_dict()
+    before = data["error_before"].get("rms_frequency_error_pct")
+    after = data["error_after"].get("rms_frequency_error_pct")
+    parts.append(f"<p>verdict: <b id='verdict'>{_e(data['verdict'])}</b>; RMS frequency error "
+                 f"<b id='rms-before'>{_e(fmt(before))}</b> % before, <b id='rms-after'>{_e(fmt(after))}</b> % "
+                 f"after (model: {_e(data['error_after'].get('model', '-'))})</p>")
+    eff_rows = []
+    for eff in data.get("effects", []):
+        for key, v in (eff.get("parameters") or {}).items():
+            v = v if isinstance(v, dict) else {"value": v}
+            eff_rows.append([eff["name"], eff.get("variant") or "", key, fmt(v.get("value")), fmt(v.get("std")),
+                             v.get("unit") or ""])
+    if eff_rows:
+        parts += ["<h3>Effects of the selected model</h3>",
+                  _table(["effect", "variant", "parameter", "value", "std", "unit"], eff_rows)]
+    parts += ["<h3>Modes before and after</h3>", _table(
+        ["mode", "run", "measured (Hz)", "sigma (Hz)", "model before (Hz)", "model after (Hz)", "error before %",
+         "error after %", "MAC before", "MAC after"],
+        [[m.get("label"), m.get("run") or "", fmt(m.get("measured_hz"), "", 7), fmt(m.get("sigma_hz")),
+          fmt(m.get("model_before_hz"), "", 7), fmt(m.get("model_after_hz"), "", 7), fmt(m.get("error_before_pct")),
+          fmt(m.get("error_after_pct")), fmt(m.get("mac_before")), fmt(m.get("mac_after"))]
+         for m in data.get("modes", [])])]
+    parts += ["<h3>Candidates (best BIC first)</h3>", _table(
+        ["candidate", "k", "chi2", "dof", "BIC", "dBIC", "RMS error %", "accepted", "note"],
+        [[c.get("variant") or c.get("name"), c.get("n_params"), fmt(c.get("chi2")), c.get("dof"), fmt(c.get("bic")),
+          fmt(c.get("delta_bic")), fmt(c.get("rms_frequency_error_pct")), "yes" if c.get("accepted") else "no",
+          c.get("note") or ""] for c in data.get("candidates", [])], table_cls="candidates")]
+    for note in data.get("notes", []):
+        parts.append(f"<p>{_e(note)}</p>")
+    try:
+        overlay = _overlay(res)
+    except Exception as exc:  # noqa: BLE001 - the FRF panel is optional; say why it is missing
+        overlay = None
+        parts.append(f"<p class='warn'>FRF panel left out ({_e(type(exc).__name__)}: {_e(exc)})</p>")
+    parts.append(_img(_figure_png(lambda buf: plot_explanation(res.explanation, buf, frf=overlay)),
+                      "explain figure: measured vs model before and after"))
+    return parts
+
+
+def _hits(res: ReportResults) -> list[str]:
+    from guidefit.report import fmt
+
+    ident = res.identification
+    hits = ident.hit_rows()  # runs that gave no FRF included
+    parts = [f"<h2>Hits</h2><p>{sum(h['accepted'] for h in hits)} accepted, "
+             f"{sum(not h['accepted'] for h in hits)} rejected</p>",
+             _table(["run", "hit", "start sample", "peak force (N)", "accepted", "reason"],
+                    [[h["run"], h["hit"], h.get("start_sample", "-"), fmt(h["peak_force_n"]),
+                      "yes" if h["accepted"] else "no", h["reason"] or ""] for h in hits],
+                    ["" if h["accepted"] else "bad" for h in hits])]
+    if ident.warnings:
         parts.append("<h2>Warnings</h2><ul>" + "".join(
-            f"<li class='warn'>{html.escape(w)}</li>" for w in result.warnings) + "</ul>")
-    parts.append("<h2>Explanation of the model-measurement residual</h2>")
-    if explanation is None:
-        parts.append(f"<p class='warn'>explain was not run: {html.escape(explain_error or 'no result')}</p>")
-    else:
-        data = explanation.to_dict()
-        parts.append(f"<p>verdict: <b>{html.escape(data['verdict'])}</b>; RMS frequency error "
-                     f"{fmt(data['error_before']['rms_frequency_error_pct'])} % before, "
-                     f"{fmt(data['error_after']['rms_frequency_error_pct'])} % after</p>")
-        for eff in data.get("effects", []):
-            params = ", ".join(f"{k} = {fmt(v.get('value'))} ± {fmt(v.get('std'))}"
-                               for k, v in eff.get("parameters", {}).items())
-            parts.append(f"<p>effect <b>{html.escape(eff['name'])}</b>: {html.escape(params)}</p>")
-        parts.append(_table(["mode", "measured (Hz)", "model before (Hz)", "model after (Hz)"],
-                            [[m.get("label"), fmt(m.get("measured_hz")), fmt(m.get("model_before_hz")),
-                              fmt(m.get("model_after_hz"))] for m in data.get("modes", [])]))
-        for note in data.get("notes", []):
-            parts.append(f"<p>{html.escape(str(note))}</p>")
+            f"<li class='warn'>{_e(w)}</li>" for w in ident.warnings) + "</ul>")
+    return parts
+
+
+def render_html(res: ReportResults) -> str:
+    """The HTML text of a :class:`ReportResults`."""
+    ident = res.identification
+    identify_json = ident.to_dict()
+    identify_json.pop("force_levels", None)  # identify --json has none; they are explain's input
+    embedded = {"identify": identify_json,
+                "explain": None if res.explanation is None else res.explanation.to_dict(),
+                "force_levels": ident.to_dict().get("force_levels", [])}
+    parts = [f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>guidefit report: {_e(res.path)}</title>"
+             f"<style>{_STYLE}</style></head><body>"]
+    parts += _header(res)
+    parts += _parameters_and_modes(res)
+    parts += _shapes(res)
+    parts += _explanation(res)
+    parts += _hits(res)
+    parts.append(_json_script(embedded))
     parts.append("</body></html>")
     return "\n".join(parts)
 
 
-def write_report(path, out_path, guide=None) -> None:
-    """Identify (and explain) one recording and write the HTML report."""
-    from guidefit.errors import GuidefitError
-    from guidefit.identify import identify
+def write_report(path, out_path, guide=None, settings=None, candidates=None, progress=None) -> None:
+    """Identify and explain one recording (:func:`report_results`) and write the HTML report whole."""
+    import os
+    import tempfile
+    from pathlib import Path
 
-    result = identify(path, guide=guide)
-    explanation, error = None, None
+    out = Path(out_path)
+    if out.exists() and Path(path).exists() and os.path.samefile(out, path):
+        from guidefit.errors import RecordingError
+
+        raise RecordingError(f"{out}: is the input recording; choose another output file")
+    text = render_html(report_results(path, guide=guide, settings=settings, candidates=candidates,
+                                      progress=progress))
+    fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent if str(out.parent) else ".")
     try:
-        from guidefit.explain import explain_identification
+        with os.fdopen(fd, "w", encoding="utf-8") as handle:
+            handle.write(text)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)  # as open() would have made it, not mkstemp's 0600
+        os.replace(tmp, out)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
 
-        explanation = explain_identification(result)
-    except (GuidefitError, ImportError) as exc:
-        error = str(exc)
-    text = render_html(result, explanation, error)
-    with open(out_path, "w", encoding="utf-8") as handle:
-        handle.write(text)
+
+def loads_embedded(text: str) -> dict:
+    """The results a report embeds (``identify``, ``explain``, ``force_levels``), from its HTML text."""
+    start = text.index("id='guidefit-results'>") + len("id='guidefit-results'>")
+    return json.loads(text[start:text.index("</script>", start)])
