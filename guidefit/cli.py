@@ -451,12 +451,14 @@ def _id_list(text: str | None, option: str):
 def export_cmd(results, fmt, joint, explain_paths, guide_name, element, units, axis_map, carriage_nodes,
                rail_nodes, first_element, id_step, n_vertical, n_horizontal, out_path):
     """Joints for a machine FEM model: 6x6 stiffness and damping per carriage (paper Fig. 10)."""
+    from guidefit import report
     from guidefit.export import export
 
-    text = export(results, fmt, joint=joint, explanations=explain_paths, guide=guide_name, element=element,
-                  units=units, axis_map=axis_map, carriage_nodes=_id_list(carriage_nodes, "--carriage-node"),
-                  rail_nodes=_id_list(rail_nodes, "--rail-node"), first_element=first_element, id_step=id_step,
-                  n_vertical=n_vertical, n_horizontal=n_horizontal)
+    with report.spinner("explaining carriages", enabled=joint == "explained") as progress:
+        text = export(results, fmt, joint=joint, explanations=explain_paths, guide=guide_name, element=element,
+                      units=units, axis_map=axis_map, carriage_nodes=_id_list(carriage_nodes, "--carriage-node"),
+                      rail_nodes=_id_list(rail_nodes, "--rail-node"), first_element=first_element,
+                      id_step=id_step, n_vertical=n_vertical, n_horizontal=n_horizontal, progress=progress)
     if out_path:
         with open(out_path, "w", encoding="utf-8") as handle:
             handle.write(text)

@@ -325,11 +325,12 @@ def _explain_result(result: dict, where: str) -> dict:
 
 
 def joints_from_results(results: list[dict], joint: str = "explained", explanations=(), guide=None,
-                        where: str = "results") -> list[Joint]:
+                        where: str = "results", progress=None) -> list[Joint]:
     """One :class:`Joint` per identified carriage of ``results`` (entries with an error are skipped).
 
     ``explanations``: ``explain --json`` objects, matched to results by ``file``;
     a result without one is explained from its modes (as ``explain --modes``).
+    ``progress(done, total, name)`` is called after each carriage.
     """
     if joint not in JOINTS:
         raise ExportError(f"export: joint '{joint}' unknown; use one of {', '.join(JOINTS)}")
@@ -355,6 +356,8 @@ def joints_from_results(results: list[dict], joint: str = "explained", explanati
                                   "or use --joint apparent")
             explanation = _explain_result(result, label)
         joints.append(explained_joint(result, explanation, guide, label))
+        if progress is not None:
+            progress(j + 1, len(results), _safe(str(result.get("file", "")), 40))
     if not joints:
         raise ExportError(f"{where}: no identified carriage to export")
     return joints
@@ -771,7 +774,8 @@ def to_json(joints: list[Joint], elements: list[Element], units: str = "si", axi
 
 
 def export(results_path, fmt: str, *, joint: str = "explained", explanations=(), guide=None,
-           element: str = "matrix", units: str = "si", axis_map: str | None = None, **numbering) -> str:
+           element: str = "matrix", units: str = "si", axis_map: str | None = None, progress=None,
+           **numbering) -> str:
     """Read identify results (and optional explain results) and render them in ``fmt``.
 
     ``explanations`` are paths of ``explain --json`` output; ``numbering``:
@@ -788,7 +792,8 @@ def export(results_path, fmt: str, *, joint: str = "explained", explanations=(),
             docs.extend(d if isinstance(d, list) else [d])
     rot = parse_axis_map(axis_map)
     unit_transform(units)
-    joints = joints_from_results(read_results(results_path), joint, docs, guide, where=_safe(str(results_path)))
+    joints = joints_from_results(read_results(results_path), joint, docs, guide, where=_safe(str(results_path)),
+                                 progress=progress)
     max_id = NASTRAN_MAX_ID if fmt == "nastran" else OTHER_MAX_ID
     per = {("ansys", "matrix"): 2, ("ansys", "bush"): 6, ("abaqus", "springs"): 2}.get((fmt, element), 1)
     elements = build_elements(joints, element, units=units, axis_map=rot, max_id=max_id, ids_per_element=per,

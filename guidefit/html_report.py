@@ -19,6 +19,9 @@ that identification. The page then renders those two results:
 - the explain result: verdict, RMS error before and after, the effects, the
   per-mode table, the ranked candidates and the explain figure (its FRF panel
   uses the identification's FRF and its identified damping ratios);
+- the joint ``guidefit export`` writes (:func:`guidefit.export.explained_joint`):
+  apparent Eq. (24)-(29) values beside the explained joint with the rig
+  removed, and its 6x6 stiffness and damping;
 - every hit with its reason if rejected, and the warnings.
 
 The results themselves are embedded as JSON (``<script type="application/json"
@@ -398,6 +401,39 @@ def _explanation(res: ReportResults) -> list[str]:
     return parts
 
 
+def _joint(res: ReportResults) -> list[str]:
+    """The joint ``guidefit export`` writes for these results (:func:`guidefit.export.explained_joint`)."""
+    from guidefit.errors import GuidefitError
+    from guidefit.export import DOF_NAMES, explained_joint
+    from guidefit.report import fmt
+
+    parts = ["<h2>Joint for the machine model (guidefit export)</h2>"]
+    if res.explanation is None:
+        return parts + ["<p class='warn'>no explanation: only the apparent Eq. 24-29 values exist</p>"]
+    try:
+        joint = explained_joint(res.identification.to_dict(), res.explanation.to_dict(),
+                                res.identification.guide, "report")
+    except GuidefitError as exc:
+        return parts + [f"<p class='warn'>{_e(exc)}</p>"]
+    a, e = joint.apparent, joint.explained
+    parts.append(_table(["quantity", "apparent (Eq. 24-29 of the test)", "explained joint (rig removed)"], [
+        ["vertical stiffness", fmt(a["K_V"], "N/m", 5), fmt(e["K_V"], "N/m", 5)],
+        ["lateral stiffness", fmt(a["K_H"], "N/m", 5), fmt(e["K_H"], "N/m", 5)],
+        ["vertical damping", fmt(a["c_V"], "N s/m", 5), fmt(e["c_V"], "N s/m", 5)],
+        ["lateral damping", fmt(a["c_H"], "N s/m", 5), fmt(e["c_H"], "N s/m", 5)],
+        ["f_V, f_H (Hz)", f"{res.identification.parameters['f_V']['value'] or float('nan'):.1f}, "
+                          f"{res.identification.parameters['f_H']['value'] or float('nan'):.1f}",
+         f"{e['f_V']:.1f}, {e['f_H']:.1f} (rig-free model)"]]))
+    parts.append(f"<p>rig effects removed: {_e('; '.join(joint.removed) or 'none')}; joint effects kept: "
+                 f"{_e('; '.join(joint.kept) or 'none (nominal K_n)')}</p>")
+    for note in joint.notes:
+        parts.append(f"<p>{_e(note)}</p>")
+    for title, m in (("stiffness (SI)", joint.stiffness), ("damping (SI)", joint.damping)):
+        parts += [f"<h3>6x6 {title} at the carriage origin</h3>",
+                  _table(["", *DOF_NAMES], [[DOF_NAMES[i], *(f"{v:.6g}" for v in m[i])] for i in range(6)])]
+    return parts
+
+
 def _hits(res: ReportResults) -> list[str]:
     from guidefit.report import fmt
 
@@ -429,6 +465,7 @@ def render_html(res: ReportResults) -> str:
     parts += _parameters_and_modes(res)
     parts += _shapes(res)
     parts += _explanation(res)
+    parts += _joint(res)
     parts += _hits(res)
     parts.append(_json_script(embedded))
     parts.append("</body></html>")

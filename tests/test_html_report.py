@@ -83,7 +83,7 @@ def test_report_metadata_and_sections(report):
                    f"<td>guidefit</td><td>{__version__}</td>", "identify estimator", "explain candidates",
                    "<h2>Runs and sensors</h2>", "<td>acc_A_y</td>", "<h2>Joint parameters",
                    "<h2>FRFs and fitted modes</h2>", "<h2>Mode shapes at the measuring points</h2>",
-                   "<h3>Modes before and after</h3>", "<h2>Hits</h2>", "verdict", "K_V", "c_H", "roll_low"):
+                   "<h3>Modes before and after</h3>", "<h2>Hits</h2>", "<h2>Joint for the machine model", "verdict", "K_V", "c_H", "roll_low"):
         assert needle in report, needle
     assert re.search(r"<td>date</td><td>\d{4}-\d\d-\d\d \d\d:\d\d:\d\d UTC</td>", report)
     # self-contained: every src is an embedded PNG, no external resource
@@ -100,7 +100,7 @@ def test_hostile_names_and_descriptions_are_escaped(tmp_path):
     with h5py.File(evil, "a") as f:
         f.attrs["description"] = "<img src=x onerror=alert(2)></script><script>alert(3)</script>"
     out = tmp_path / "r.html"
-    _cli("report", evil, "-o", out)
+    _cli("report", evil, "-o", out, "--no-jackknife")
     text = out.read_text()
     assert "<img src=x" not in text and "<script>alert" not in text
     assert "&lt;img src=x onerror=alert(2)&gt;" in text
