@@ -164,6 +164,8 @@ def read_results(path) -> list[dict]:
 
 
 def _finite(value, what: str) -> float:
+    if isinstance(value, bool):
+        raise ExportError(f"{what}: expected a number, got {value!r}")
     try:
         number = float(value)
     except (TypeError, ValueError):
@@ -231,6 +233,8 @@ def _describe(effect) -> str:
 def _damping_by_label(result: dict) -> dict:
     out = {}
     for m in list(result.get("modes") or []):
+        if isinstance(m, dict) and m.get("level") is not None:
+            continue  # one force level's estimate: the mode's own entry carries the test's damping
         if isinstance(m, dict) and m.get("label") and m.get("damping_ratio") is not None:
             zeta = float(m["damping_ratio"])
             if math.isfinite(zeta) and zeta >= 0:

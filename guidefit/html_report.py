@@ -226,7 +226,8 @@ def _parameters_and_modes(res: ReportResults) -> list[str]:
     mode_rows = []
     for m in list(ident.modes) + list(ident.extra_modes):
         hp = m.half_power
-        mode_rows.append([m.label, m.run, fmt(m.frequency_hz, "Hz", significant_digits(m.frequency_hz,
+        level = getattr(m, "level", None)
+        mode_rows.append([m.label if level is None else f"{m.label} (level {level})", m.run, fmt(m.frequency_hz, "Hz", significant_digits(m.frequency_hz,
                                                                                        m.frequency_std_hz)),
                           fmt(m.frequency_std_hz, "Hz", 2), f"{m.damping_ratio:.4f}", fmt(m.damping_std, "", 2),
                           fmt(m.model_frequency_hz, "Hz"), f"{m.coherence:.3f}",
@@ -242,7 +243,7 @@ def _parameters_and_modes(res: ReportResults) -> list[str]:
 def _shapes(res: ReportResults) -> list[str]:
     """Mode shapes at the sensors (A-D): the real modal constants per channel, table and figure."""
     ident = res.identification
-    modes = list(ident.modes) + list(ident.extra_modes)
+    modes = _shape_modes(ident)
     channels = []
     for m in modes:
         for name in m.shape:
@@ -263,6 +264,12 @@ def _shapes(res: ReportResults) -> list[str]:
     return parts
 
 
+def _shape_modes(identification) -> list:
+    """The modes whose shapes are drawn: each mode once (force-level estimates of a mode left out)."""
+    return [m for m in list(identification.modes) + list(identification.extra_modes)
+            if getattr(m, "level", None) is None]
+
+
 def plot_shapes(identification, path) -> None:
     """One 3-D panel per mode: the sensors' modal constants as arrows along their directions at A-D."""
     import matplotlib
@@ -271,7 +278,7 @@ def plot_shapes(identification, path) -> None:
     import matplotlib.pyplot as plt
     import numpy as np
 
-    modes = list(identification.modes) + list(identification.extra_modes)
+    modes = _shape_modes(identification)
     sensors = {}
     for run in identification.runs:
         for ch in run.channels:
@@ -427,7 +434,8 @@ def _joint(res: ReportResults) -> list[str]:
     parts.append(f"<p>rig effects removed: {_e('; '.join(joint.removed) or 'none')}; joint effects kept: "
                  f"{_e('; '.join(joint.kept) or 'none (nominal K_n)')}</p>")
     for note in joint.notes:
-        parts.append(f"<p>{_e(note)}</p>")
+        if not note.startswith("rig effects removed"):  # said above
+            parts.append(f"<p>{_e(note)}</p>")
     for title, m in (("stiffness (SI)", joint.stiffness), ("damping (SI)", joint.damping)):
         parts += [f"<h3>6x6 {title} at the carriage origin</h3>",
                   _table(["", *DOF_NAMES], [[DOF_NAMES[i], *(f"{v:.6g}" for v in m[i])] for i in range(6)])]
