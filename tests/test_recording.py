@@ -202,13 +202,28 @@ def test_string_attributes_in_any_h5py_form(tmp_path, encode):
     assert [ch.unit for ch in run.channels] == ["N", "m/s^2", "g"]
 
 
-def test_integer_samples_are_accepted_as_float(tmp_path):
+def test_integer_samples_need_an_explicit_scale(tmp_path):
+    """The contract says float32 or float64: integer counts read as values would be
+    wrong by the ADC's step, so they are refused in one line unless the dataset gives
+    'sample_scale' (the value of one count in each channel's unit)."""
     spec = good_spec()
     ds_spec(spec)["data"] = np.arange(24, dtype=np.int16).reshape(8, 3)
-    run = read_recording(write_raw(tmp_path / "rec.h5", spec)).runs[0]
+    with pytest.raises(RecordingError, match="integer dtype int16; expected float32 or float64, or .*'sample_scale'"):
+        read_recording(write_raw(tmp_path / "rec.h5", spec))
+    ds_spec(spec)["attrs"]["sample_scale"] = [0.0625, 0.5, 0.25]
+    run = read_recording(write_raw(tmp_path / "scaled.h5", spec)).runs[0]
     block = read_block(run, 1, 2)
-    assert block.dtype == np.float64
-    np.testing.assert_array_equal(block, [[3.0, 4.0, 5.0 * STANDARD_GRAVITY]])
+    assert block.dtype == np.float64 and run.sample_dtype == np.int16
+    np.testing.assert_allclose(block, [[3 * 0.0625, 4 * 0.5, 5 * 0.25 * STANDARD_GRAVITY]], rtol=1e-15)
+    # copied or loaded: values in the declared units, so a rewrite reads the same
+    data = run.to_data()
+    np.testing.assert_allclose(data.data[1], [3 * 0.0625, 4 * 0.5, 5 * 0.25], rtol=1e-15)
+    write_recording(tmp_path / "copy.h5", read_recording(tmp_path / "scaled.h5"))
+    np.testing.assert_allclose(read_block(read_recording(tmp_path / "copy.h5").runs[0], 1, 2), block, rtol=1e-15)
+    for bad in ([1.0, 2.0], [1.0, 0.0, 1.0], "x"):
+        ds_spec(spec)["attrs"]["sample_scale"] = bad
+        with pytest.raises(RecordingError, match="sample_scale"):
+            read_recording(write_raw(tmp_path / "bad.h5", spec))
 
 
 def test_nan_samples_are_not_a_reading_error(tmp_path):

@@ -42,11 +42,13 @@ from guidefit.io.records import (
     FORMAT_NAME,
     FORMAT_VERSION,
     LAYOUTS,
+    Channel,
     Recording,
     RecordingData,
     Run,
     RunData,
     _build_channels,
+    _in_units,
     _raw_read,
 )
 from guidefit.io.registry import FileFormat
@@ -55,6 +57,9 @@ from guidefit.io.watchdog import can_fork, in_child, timeout_s
 __all__ = ["H5Source", "SignalsWriter", "open_signals_writer", "read_hdf5", "write_hdf5"]
 
 SUFFIXES = (".h5", ".hdf5")
+SAMPLE_SCALE = "sample_scale"
+"""Dataset attribute (an extension of the contract): the value of one stored count in
+each channel's unit, one number or one per channel. Required for integer samples."""
 _CHUNK_BYTES = 1 << 20  # target size of one HDF5 chunk
 _COPY_ROWS = 1 << 18  # rows per block when copying a signals run
 
@@ -107,9 +112,7 @@ class _H5Handle:
     """An open dataset: ``read(index)``, ``dtype``, ``read_hits_into(first, out)``."""
 
     def __init__(self, f, source: H5Source):
-        import h5py
-
-        ds = f[source.dataset]
+        ds = _open_dataset(f, source.dataset)
         self._ds = ds
         self.dtype = ds.dtype
         self._direct = None
@@ -118,9 +121,7 @@ class _H5Handle:
             # hits are read whole, so each chunk (consecutive samples of one hit,
             # all channels) is read once: without a chunk cache HDF5 reads it
             # straight into the output array instead of through the cache (one copy less)
-            access = h5py.h5p.create(h5py.h5p.DATASET_ACCESS)
-            access.set_chunk_cache(0, 0, 1.0)
-            self._direct = h5py.h5d.open(f.id, source.dataset.encode(), dapl=access)
+            self._direct = _open_dataset(f, source.dataset, chunk_cache=False).id
 
     def read(self, index: tuple) -> np.ndarray:
         return self._ds[index]
@@ -133,6 +134,20 @@ class _H5Handle:
         selection = dataset.get_space()
         selection.select_hyperslab((int(first), 0, 0), out.shape)
         dataset.read(h5py.h5s.create_simple(out.shape), selection, out)
+
+
+def _open_dataset(f, path: str, chunk_cache: bool = True):
+    """The dataset at ``path`` (links followed, as HDF5 does) with external raw storage
+    and virtual-dataset sources resolved against the folder of the file that holds the
+    dataset (``${ORIGIN}``), never against the current working directory."""
+    import h5py
+
+    access = h5py.h5p.create(h5py.h5p.DATASET_ACCESS)
+    access.set_efile_prefix(b"${ORIGIN}")
+    access.set_virtual_prefix(b"${ORIGIN}")
+    if not chunk_cache:
+        access.set_chunk_cache(0, 0, 1.0)
+    return h5py.Dataset(h5py.h5d.open(f.id, path.encode(), dapl=access))
 
 
 # --------------------------------------------------------------------- reading
@@ -222,7 +237,7 @@ def _read_hdf5_structure(p: Path, display: str) -> Recording:
         _check_version(attrs["format_version"], display)
         guide = _optional_text(attrs, "guide", display) or None
         description = _optional_text(attrs, "description", display)
-        runs_group = f.get("runs")
+        runs_group = _get_checked(f, "runs", f"{display}: group '/runs'")
         if runs_group is None:
             raise RecordingError(
                 f"{display}: group '/runs' missing; expected one group per run under /runs"
@@ -236,7 +251,7 @@ def _read_hdf5_structure(p: Path, display: str) -> Recording:
             raise RecordingError(
                 f"{display}: '/runs' holds no runs; expected at least one run group"
             )
-        runs = tuple(_read_hdf5_run(p, display, runs_group, name) for name in names)
+        runs = tuple(_read_hdf5_run(p, display, f, runs_group, name) for name in names)
     return Recording(path=display, guide=guide, description=description, runs=runs)
 
 
@@ -266,11 +281,171 @@ def _optional_text(attrs, name: str, where: str) -> str:
     return text[0]
 
 
-def _read_hdf5_run(p: Path, display: str, runs_group, name: str) -> Run:
+def _linked_file(link_file: str, holder: str) -> Path:
+    """Where HDF5 finds the file ``link_file`` named by an external link or a virtual
+    source in the file ``holder``: as given if absolute, else in ``holder``'s folder."""
+    target = Path(os.fsdecode(link_file))
+    return target if target.is_absolute() else Path(holder).resolve().parent / target
+
+
+def _regular_file(target: Path, where: str, what: str) -> None:
+    """``target`` must exist and be a regular file (a device or FIFO would block or never end)."""
+    import stat
+
+    try:
+        mode = os.stat(target).st_mode
+    except OSError:
+        raise RecordingError(f"{where}: {what} '{target}' does not exist") from None
+    if not stat.S_ISREG(mode):
+        raise RecordingError(f"{where}: {what} '{target}' is not a regular file (a device or FIFO?)")
+
+
+def _scaled(channels, value, where: str):
+    """Channels whose ``scale_to_si`` includes the per-count ``sample_scale`` attribute."""
+    arr = _numbers(value)
+    n = len(channels)
+    if arr is None or arr.size not in (1, n):
+        raise RecordingError(
+            f"{where}: attribute '{SAMPLE_SCALE}' is {_show(value)}; expected one number or {n} "
+            "(the value of one stored count in each channel's unit)"
+        )
+    factors = np.broadcast_to(arr.reshape(-1), (n,))
+    if not np.all(np.isfinite(factors)) or np.any(factors == 0):
+        raise RecordingError(
+            f"{where}: attribute '{SAMPLE_SCALE}' is {_show(value)}; expected finite, non-zero numbers"
+        )
+    return tuple(
+        Channel(ch.name, ch.unit, ch.position_m, ch.direction, ch.scale_to_si * float(k))
+        for ch, k in zip(channels, factors)
+    )
+
+
+def _check_link(parent, key: str, where: str) -> None:
+    """An external link ``parent/key`` must lead to an existing regular file.
+
+    Checked before anything follows the link (a FIFO would block the reader). The
+    object is then reached through the link under the name it has in ``parent``'s
+    file: a master file may link runs of other files under other names.
+    """
+    import h5py
+
+    try:
+        link = parent.get(key, getlink=True)
+    except (KeyError, RuntimeError, OSError, ValueError):
+        return
+    if isinstance(link, h5py.ExternalLink):
+        target = _linked_file(link.filename, parent.file.filename)
+        _regular_file(target, where, f"external link '{key}' to file")
+
+
+def _get_checked(parent, key: str, where: str):
+    """``parent.get(key)`` after :func:`_check_link`; a link that cannot be followed is one error."""
+    _check_link(parent, key, where)
+    try:
+        return parent.get(key)
+    except (KeyError, OSError, RuntimeError) as exc:
+        raise RecordingError(f"{where}: cannot be opened ({_first_line(exc)})") from None
+
+
+def _check_storage(ds, recording: Path, where: str, depth: int = 0) -> None:
+    """Refuse samples HDF5 would read from outside the file silently wrong.
+
+    External raw storage (``ds.external``) must lie in the recording's folder (or that
+    of the linked file holding the dataset), be regular files and hold every byte of
+    the dataset (HDF5 reads a missing or short file as zeros). A virtual dataset's
+    sources must exist, and together cover the whole dataset (h5py fills what no
+    source gives with the fill value).
+    """
+    holder = ds.file.filename
+    if ds.external:
+        _check_external(ds, recording, holder, where)
+    if ds.is_virtual:
+        _check_virtual(ds, recording, holder, where, depth)
+
+
+def _check_external(ds, recording: Path, holder: str, where: str) -> None:
+    import h5py
+
+    folders = {Path(recording).resolve().parent, Path(holder).resolve().parent}
+    need = int(ds.size) * ds.dtype.itemsize
+    for name, offset, size in ds.external:
+        name = os.fsdecode(name)
+        target = _linked_file(name, holder)
+        real = target.resolve()
+        if not any(real.is_relative_to(folder) for folder in folders):
+            raise RecordingError(
+                f"{where}: external raw storage '{name}' lies outside the recording's folder; "
+                "refused (copy the samples into the file or beside it)"
+            )
+        _regular_file(real, where, "external raw storage")
+        segment = need if size == h5py.h5f.UNLIMITED else min(int(size), need)
+        have = max(0, os.stat(real).st_size - int(offset))
+        if have < segment:
+            raise RecordingError(
+                f"{where}: external raw storage '{name}' holds {have} bytes from offset {offset}, "
+                f"the dataset needs {segment}; HDF5 would read the rest as zeros"
+            )
+        need -= segment
+        if need <= 0:
+            break
+    if need > 0:
+        raise RecordingError(
+            f"{where}: external raw storage holds {int(ds.size) * ds.dtype.itemsize - need} of the "
+            f"{int(ds.size) * ds.dtype.itemsize} bytes of the dataset"
+        )
+
+
+def _check_virtual(ds, recording: Path, holder: str, where: str, depth: int) -> None:
+    import h5py
+
+    if depth > 4:
+        raise RecordingError(f"{where}: virtual datasets nested more than 4 deep; refused")
+    covered = 0
+    for source in ds.virtual_sources():
+        file_name, dset_name = source.file_name, source.dset_name
+        what = f"virtual dataset source '{file_name}:{dset_name}'"
+        if "%" in file_name or "%" in dset_name:
+            raise RecordingError(f"{where}: {what} is a name pattern; not supported")
+        covered += int(source.vspace.get_select_npoints())
+        if file_name == ".":
+            f_source, close = ds.file, False
+        else:
+            target = _linked_file(file_name, holder)
+            _regular_file(target, where, f"{what}: file")
+            try:
+                f_source, close = h5py.File(target, "r"), True
+            except OSError as exc:
+                raise RecordingError(f"{where}: {what} cannot be opened ({_first_line(exc)})") from None
+        try:
+            try:
+                src = _open_dataset(f_source, dset_name)
+            except (KeyError, OSError, RuntimeError, ValueError):
+                raise RecordingError(
+                    f"{where}: {what} is missing; HDF5 would read it as fill values"
+                ) from None
+            if source.src_space.get_select_npoints() > 0:
+                _, end = source.src_space.get_select_bounds()
+                if len(end) != src.ndim or any(e >= n for e, n in zip(end, src.shape)):
+                    raise RecordingError(
+                        f"{where}: {what} has shape {src.shape}, smaller than the part mapped "
+                        "from it; HDF5 would read the rest as fill values"
+                    )
+            _check_storage(src, recording, where, depth + 1)
+        finally:
+            if close:
+                f_source.close()
+    if covered < ds.size:
+        raise RecordingError(
+            f"{where}: virtual dataset maps {covered} of its {int(ds.size)} values to sources; "
+            "the rest would read as fill values"
+        )
+
+
+def _read_hdf5_run(p: Path, display: str, root, runs_group, name: str) -> Run:
     import h5py
 
     where = f"{display}: run '{name}'"
-    group = runs_group.get(name)
+    group = _get_checked(runs_group, name, where)
     if not isinstance(group, h5py.Group):
         raise RecordingError(
             f"{where}: not a group; expected a group holding a 'signals' or 'hits' dataset"
@@ -291,6 +466,8 @@ def _read_hdf5_run(p: Path, display: str, runs_group, name: str) -> Run:
         exc_pos = _check_vector(
             attrs["excitation_position_m"], where, "excitation_position_m", False
         )
+    for key in LAYOUTS:
+        _check_link(group, key, f"{where}: dataset '{key}'")
     present = [k for k in LAYOUTS if k in group]
     if not present:
         have = ", ".join(group.keys()) or "nothing"
@@ -300,13 +477,20 @@ def _read_hdf5_run(p: Path, display: str, runs_group, name: str) -> Run:
             f"{where}: has both 'signals' and 'hits'; expected exactly one of them"
         )
     layout = present[0]
-    ds = group.get(layout)
-    if not isinstance(ds, h5py.Dataset):
+    if group.get(layout, getclass=True) is not h5py.Dataset:
         raise RecordingError(f"{where}: '{layout}' is not a dataset")
+    access_path = f"/runs/{name}/{layout}"  # in the recording's own file: links are followed on every read
+    ds = _open_dataset(root, access_path)
+    _check_storage(ds, p, f"{where}: dataset '{layout}'")
     if ds.dtype.kind not in "fiu":
         raise RecordingError(
-            f"{where}: dataset '{layout}' has dtype {ds.dtype}; expected float32 or float64 "
-            "(integers are accepted)"
+            f"{where}: dataset '{layout}' has dtype {ds.dtype}; expected float32 or float64"
+        )
+    if ds.dtype.kind in "iu" and SAMPLE_SCALE not in ds.attrs:
+        raise RecordingError(
+            f"{where}: dataset '{layout}' has integer dtype {ds.dtype}; expected float32 or float64, "
+            f"or integer counts with attribute '{SAMPLE_SCALE}' (the value of one count in each "
+            "channel's unit)"
         )
     want = 2 if layout == "signals" else 3
     if ds.ndim != want:
@@ -348,6 +532,8 @@ def _read_hdf5_run(p: Path, display: str, runs_group, name: str) -> Run:
     channels, force_index = _build_channels(
         where, names, tuple(texts["units"]), tables["positions_m"], tables["directions"]
     )
+    if SAMPLE_SCALE in ds.attrs:
+        channels = _scaled(channels, ds.attrs[SAMPLE_SCALE], f"{where}: dataset '{layout}'")
     pretrigger = None
     if "pretrigger_samples" in ds.attrs:
         pretrigger = _check_pretrigger(ds.attrs["pretrigger_samples"], ds.shape[-2], dwhere)
@@ -366,7 +552,7 @@ def _read_hdf5_run(p: Path, display: str, runs_group, name: str) -> Run:
         n_samples=int(ds.shape[-2]),
         n_hits_stored=int(ds.shape[0]) if layout == "hits" else 0,
         pretrigger_samples=pretrigger,
-        source=H5Source(os.path.abspath(p), ds.name, ds.dtype.str),
+        source=H5Source(os.path.abspath(p), access_path, ds.dtype.str),
         force_index=force_index,
         file=display,
     )
@@ -503,18 +689,18 @@ def _write_hdf5(tmp: Path, display: str, recording, compression) -> None:
                 )
                 ds[...] = data
             else:  # a Run read from a file: copy block by block in stored units
-                dtype = _file_dtype(run.sample_dtype)
+                dtype = _file_dtype(run.sample_dtype if _in_units(run, None) is None else np.float64)
                 if run.layout == "signals":
                     shape = (run.n_samples, run.n_channels)
                     ds = _create_run(runs_group, _header(run), "signals", shape, dtype, compression)
                     for start in range(0, run.n_samples, _COPY_ROWS):
                         stop = min(run.n_samples, start + _COPY_ROWS)
-                        ds[start:stop] = _raw_read(run, (slice(start, stop), slice(None)))
+                        ds[start:stop] = _in_units(run, _raw_read(run, (slice(start, stop), slice(None))))
                 else:
                     shape = (run.n_hits_stored, run.n_samples, run.n_channels)
                     ds = _create_run(runs_group, _header(run), "hits", shape, dtype, compression)
                     for i in range(run.n_hits_stored):
-                        ds[i] = _raw_read(run, (i, slice(None), slice(None)))
+                        ds[i] = _in_units(run, _raw_read(run, (i, slice(None), slice(None))))
 
 
 class SignalsWriter:

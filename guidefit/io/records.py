@@ -367,7 +367,8 @@ class Run:
         ----------
         si : bool
             False (default): samples and ``units`` as stored in the file, with
-            the file's dtype, so ``write_recording`` reproduces the file.
+            the file's dtype, so ``write_recording`` reproduces the file (samples
+            stored as counts or volts with a scale: float64 values in the units).
             True: float64 samples in SI and units ``N``/``m/s^2``.
         """
         if self.layout == "signals":
@@ -375,6 +376,8 @@ class Run:
         else:
             data = _raw_read(self, (slice(0, self.n_hits_stored), slice(None), slice(None)))
         units = tuple(ch.unit for ch in self.channels)
+        if not si:
+            data = _in_units(self, data)  # counts or volts: values in the declared units
         if si:
             data = np.asarray(data, dtype=np.float64) * self.scale_to_si
             units = tuple(ch.unit_si for ch in self.channels)
@@ -704,6 +707,26 @@ def _checked_read(run: Run, handle, index: tuple) -> np.ndarray:
         raise
     except _READ_ERRORS as exc:
         raise _read_error(run, exc) from None
+
+
+def _in_units(run: Run, raw):
+    """``raw`` (file units) in each channel's declared unit (``Channel.unit``).
+
+    The same array when every channel's ``scale_to_si`` is just its unit's factor
+    (the file stores values in the unit); else float64 times the per-count factor
+    (integer counts with a ``sample_scale``, volts with a sensitivity). With
+    ``raw=None``: None when no conversion is needed, else the factors.
+    """
+    unit = np.array([
+        (FORCE_UNITS if ch.kind == "force" else ACCELERATION_UNITS).get(ch.unit, ch.scale_to_si)
+        for ch in run.channels
+    ])
+    factors = run.scale_to_si / unit
+    if np.all(factors == 1.0):
+        return None if raw is None else raw
+    if raw is None:
+        return factors
+    return np.asarray(raw, dtype=np.float64) * factors
 
 
 def _raw_read(run: Run, index: tuple) -> np.ndarray:
