@@ -60,6 +60,22 @@ order (the first two end the assessment; the others are all reported):
     lost a block of samples (they read as a constant, often 0). A live,
     noisy signal never stands still in all channels at once; before the
     trigger (e.g. noise-free simulated data) such blocks are normal.
+``flat_end``
+    A response channel ends in a run of samples exactly equal to its last
+    value (zeros of a padded export, the held value of a DAQ that stopped),
+    at least 2 % of the record (16 samples or more) long, while just before
+    that run it still rang: above 4 quantisation steps (the channel's LSB:
+    the smallest step between its distinct values; for unquantised data a
+    tiny number) and, in RMS, above 3 times its pre-trigger noise (a response
+    that had decayed into its noise lost nothing when the rest was cut). A real decaying response is never exactly constant:
+    quantised, it becomes constant only once it has decayed below one LSB,
+    and because it took the whole time since the trigger to decay from its
+    peak to that level, its amplitude in the last 1/32 of that time (the
+    window looked at) is at most (peak / LSB)^(1/32), about 1.4 LSB for a
+    full-scale 16-bit peak, 1.7 for 24 bits: a quiet 16-bit tail passes.
+    Truncated records would otherwise be fitted as if the response had died
+    out (zeroing every record of the sample 3 ms after its hit gave f_V
+    -1.9 % and zeta_V +14 %).
 ``not_decayed``
     A response channel has not died out by the end of the record: the RMS of
     its last ``decay_end_fraction`` (5 %) of samples, times sqrt(2), exceeds
@@ -115,6 +131,7 @@ REJECTION_CODES = {
     "double_hit": "a second impact in the record",
     "clipped": "a channel is flat at its extreme (overload)",
     "dropout": "every channel frozen for a block of samples while the response rings",
+    "flat_end": "a response ends held exactly constant while it still rang (DAQ stopped, padded export)",
     "not_decayed": "a response has not died out by the end of the record",
     "incomplete": "the record would run outside the signal",
     "overlap": "the record overlaps the previous hit's record",
@@ -589,6 +606,23 @@ def _assess_rows(columns, run: Run, s: HitSettings, pre: int | None, median_peak
             "while the response is still ringing"
         )
 
+    flat = []
+    for c in run.response_indices:
+        noise = 0.0
+        if quiet:
+            start = columns[c][quiet] - base(c)
+            noise = math.sqrt(np.add.reduce(np.square(start, out=start)) / start.size)
+        tail = _flat_end(columns[c], pre, noise)
+        if tail is not None:
+            k, value, lsbs = tail
+            flat.append(
+                f"{names[c]} held at {value:.6g} {run.channels[c].unit_si} for its last "
+                f"{(n - k) / fs * 1e3:.3g} ms (from sample {k}), right after ringing at {lsbs:.3g} LSB"
+            )
+    if flat:
+        codes.append("flat_end")
+        reasons.append(f"flat_end: {', '.join(flat)} (DAQ stopped or padded export?)")
+
     n_end = max(8, math.ceil(s.decay_end_fraction * n))
     worst = 0.0
     slow = []
@@ -763,6 +797,47 @@ def _dropout(
         a = int(starts[k])
         if a < active_end:
             return a, int(lengths[k])
+    return None
+
+
+FLAT_END_MIN_FRACTION = 0.02
+"""Shortest constant end of a response, as a fraction of the record, that ``flat_end`` judges."""
+FLAT_END_MAX_LSB = 4.0
+"""Largest amplitude, in LSB, a response may have just before a constant end."""
+
+
+def _flat_end(x: np.ndarray, trigger: int, noise_rms: float = 0.0) -> tuple[int, float, float] | None:
+    """(first sample, value, amplitude before in LSB) of a constant end of ``x`` cut while ringing.
+
+    The end counts when the last ``max(16, 2 %)`` samples or more equal the last
+    one exactly, and in the window of ``max(8, (k - trigger) // 32)`` samples
+    before it (k: where the constant run starts) the channel deviates from that
+    value by more than :data:`FLAT_END_MAX_LSB` quantisation steps and its RMS
+    about it exceeds 3 times ``noise_rms`` (the pre-trigger noise): it still
+    rang. See the module docstring for why a real quantised decay never does.
+    """
+    n = x.size
+    need = max(16, math.ceil(FLAT_END_MIN_FRACTION * n))
+    if need >= n:
+        return None
+    value = x[-1]
+    if x[-need] != value or not np.all(x[-need:] == value):  # the usual, cheap way out
+        return None
+    moving = np.flatnonzero(x[: n - need] != value)
+    if not moving.size:
+        return None  # constant over the whole record: a dead channel, not a cut one
+    k = int(moving[-1]) + 1
+    width = max(8, (k - trigger) // 32)
+    if k - width <= trigger:
+        return None  # the response never rang before it froze
+    window = x[k - width : k] - value
+    amplitude = float(np.max(np.abs(window)))
+    if math.sqrt(float(np.mean(np.square(window)))) <= 3.0 * noise_rms:
+        return None  # it had decayed into its noise: nothing of the response was cut
+    steps = np.diff(np.unique(x))
+    lsb = float(np.min(steps)) if steps.size else math.inf
+    if amplitude > FLAT_END_MAX_LSB * lsb:
+        return k, float(value), amplitude / lsb
     return None
 
 

@@ -346,6 +346,7 @@ def test_every_rejection_code_is_documented():
         "double_hit",
         "clipped",
         "dropout",
+        "flat_end",
         "not_decayed",
         "incomplete",
         "overlap",
