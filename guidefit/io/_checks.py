@@ -228,3 +228,29 @@ def _atomic(p, write) -> None:
         with contextlib.suppress(OSError):
             tmp.unlink()
         raise
+
+
+def _require(module: str, extra: str, display: str, what: str):
+    """``importlib.import_module(module)``, or one RecordingError naming the pip extra.
+
+    For format modules whose library is optional: ``_require("nptdms", "daq",
+    display, "NI TDMS")`` gives ``<file>: reading NI TDMS needs the package
+    'nptdms': pip install 'guidefit[daq]'``.
+
+    Examples
+    --------
+    >>> _require("math", "daq", "x.tdms", "NI TDMS").sqrt(4.0)
+    2.0
+    >>> _require("no_such_module_x", "daq", "x.tdms", "NI TDMS")
+    Traceback (most recent call last):
+    ...
+    guidefit.errors.RecordingError: x.tdms: reading NI TDMS needs the package 'no_such_module_x': pip install 'guidefit[daq]'
+    """
+    import importlib
+
+    try:
+        return importlib.import_module(module)
+    except ImportError:
+        raise RecordingError(
+            f"{display}: reading {what} needs the package '{module}': pip install 'guidefit[{extra}]'"
+        ) from None

@@ -67,27 +67,68 @@ _CSV_KEYS = (
 
 
 def read_csv(p: Path, display: str) -> Recording:
-    """Read and validate a contract CSV recording (``display``: the path as given)."""
-    raw = p.read_bytes()
+    """Read and validate a contract CSV recording (``display``: the path as given).
+
+    The text is streamed: the metadata and header lines one by one, then the
+    data rows in blocks of :data:`_ROWS_PER_BLOCK` parsed by ``np.loadtxt`` into
+    one float64 table allocated once (its rows counted first in a pass over the
+    bytes). Peak memory is the table (8 bytes per value, 0.4-1.1 times the file
+    for 7-20 characters per value) plus one block, not the file's text several
+    times over.
+    """
     try:
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
+        with open(p, encoding="utf-8-sig", newline=None) as fh:
+            return _read_csv_stream(p, display, fh)
+    except UnicodeDecodeError:
         raise RecordingError(
-            f"{display}: not UTF-8 text (byte {exc.start}); expected a CSV text file"
+            f"{display}: not UTF-8 text (byte {_first_bad_byte(p)}); expected a CSV text file"
         ) from None
-    if "\x00" in text:
-        raise RecordingError(
-            f"{display}: contains NUL bytes; expected a CSV text file (is it HDF5? use .h5)"
-        )
-    lines = text.splitlines()
+
+
+def _first_bad_byte(p: Path) -> int:
+    """Offset of the first byte that is not UTF-8 (read in blocks)."""
+    import codecs
+
+    decoder = codecs.getincrementaldecoder("utf-8")()
+    offset = 0
+    with open(p, "rb") as fh:
+        while block := fh.read(1 << 20):
+            try:
+                decoder.decode(block)
+            except UnicodeDecodeError as exc:
+                return offset + exc.start
+            offset += len(block)
+    return offset
+
+
+def _nul_error(display: str) -> RecordingError:
+    return RecordingError(
+        f"{display}: contains NUL bytes; expected a CSV text file (is it HDF5? use .h5)"
+    )
+
+
+def _count_lines(p: Path) -> int:
+    """An upper bound of the file's lines in universal-newline mode (one pass, blocks of 16 MB)."""
+    lines = 1
+    with open(p, "rb") as fh:
+        while block := fh.read(1 << 24):
+            lines += block.count(b"\n") + block.count(b"\r") - block.count(b"\r\n")
+    return lines
+
+
+def _read_csv_stream(p: Path, display: str, fh) -> Recording:
     meta: dict[str, tuple[str, int]] = {}
-    i = 0
-    while i < len(lines):
-        stripped = lines[i].strip()
+    header_line = None
+    line_no = 0
+    for line in fh:
+        line_no += 1
+        if "\x00" in line:
+            raise _nul_error(display)
+        stripped = line.strip()
         if not stripped:
-            i += 1
             continue
         if not stripped.startswith("#"):
+            header_line = line
             break
         body = stripped[1:].strip()
         if ":" in body:
@@ -96,21 +137,19 @@ def read_csv(p: Path, display: str) -> Recording:
             if key in _CSV_KEYS:
                 if key in meta and meta[key][0] != value.strip():
                     raise RecordingError(
-                        f"{display}: line {i + 1} '{key}': given again as '{_clip(value.strip())}' (line {meta[key][1]}: "
+                        f"{display}: line {line_no} '{key}': given again as '{_clip(value.strip())}' (line {meta[key][1]}: "
                         f"'{_clip(meta[key][0])}'); expected each key once"
                     )
-                meta.setdefault(key, (value.strip(), i + 1))
-        i += 1
-    if i >= len(lines):
+                meta.setdefault(key, (value.strip(), line_no))
+    if header_line is None:
         raise RecordingError(
             f"{display}: no header row; expected a line of channel names such as 'time,force,acc_A_y'"
         )
-    header_no = i + 1
-    names, has_time = _csv_header(lines[i], header_no, display)
-    data_lines = lines[i + 1 :]
-    if not any(line.strip() for line in data_lines):
+    header_no = line_no
+    names, has_time = _csv_header(header_line.rstrip("\r\n"), header_no, display)
+    table = _csv_numbers(fh, header_no + 1, names, display, _count_lines(p) - header_no)
+    if table.shape[0] == 0:
         raise RecordingError(f"{display}: no data rows after the header (line {header_no})")
-    table = _csv_numbers(data_lines, header_no + 1, names, display)
 
     def line_of(key):
         return f"{display}: line {meta[key][1]} '{key}'"
@@ -212,7 +251,7 @@ def read_csv(p: Path, display: str) -> Recording:
     if "pretrigger_samples" in meta:
         value = _csv_float(meta["pretrigger_samples"][0], line_of("pretrigger_samples"))
         pretrigger = _check_pretrigger(value, table.shape[0], line_of("pretrigger_samples"))
-    data = np.ascontiguousarray(table)
+    data = table  # (a view without the time column: no second copy of the samples)
     data.setflags(write=False)
     run = Run(
         name=run_name,
@@ -255,24 +294,46 @@ def _csv_header(line: str, line_no: int, display: str) -> tuple[list[str], bool]
     return fields_, has_time
 
 
-def _csv_numbers(
-    data_lines: list[str], first_no: int, names: list[str], display: str
-) -> np.ndarray:
-    """Parse the data rows; on any problem, find the first bad line and name it."""
+_ROWS_PER_BLOCK = 65536
+
+
+def _csv_numbers(fh, first_no: int, names: list[str], display: str, max_rows: int) -> np.ndarray:
+    """Parse the data rows from ``fh`` in blocks into one float64 table of at most
+    ``max_rows`` rows; on any problem, find the first bad line of its block and name it."""
+    import itertools
+    import warnings
+
     n = len(names)
-    try:
-        table = np.loadtxt(data_lines, delimiter=",", comments=None, dtype=np.float64, ndmin=2)
-    except ValueError as exc:
-        raise _csv_locate_error(data_lines, first_no, names, display, exc) from None
-    if table.shape[1] != n:
-        raise _csv_locate_error(data_lines, first_no, names, display, None)
-    return table
+    table = np.empty((max(1, max_rows), n), dtype=np.float64)  # pages are touched as rows arrive
+    filled = 0
+    block_no = first_no
+    while True:
+        lines = list(itertools.islice(fh, _ROWS_PER_BLOCK))
+        if not lines:
+            break
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", UserWarning)  # a block of blank lines: no data
+                block = np.loadtxt(lines, delimiter=",", comments=None, dtype=np.float64, ndmin=2)
+        except ValueError as exc:
+            raise _csv_locate_error(lines, block_no, names, display, exc) from None
+        if block.size:
+            if block.shape[1] != n:
+                raise _csv_locate_error(lines, block_no, names, display, None)
+            if filled + block.shape[0] > table.shape[0]:  # cannot happen with the line count; be safe
+                table = np.concatenate([table[:filled], np.empty((block.shape[0], n))])
+            table[filled : filled + block.shape[0]] = block
+            filled += block.shape[0]
+        block_no += len(lines)
+    return table[:filled]
 
 
 def _csv_locate_error(data_lines, first_no, names, display, exc) -> RecordingError:
     n = len(names)
     comma_hint = "decimal commas? guidefit expects '.' as the decimal mark and ',' between fields"
     for k, line in enumerate(data_lines):
+        if "\x00" in line:
+            return _nul_error(display)
         stripped = line.strip()
         if not stripped:
             continue
@@ -335,34 +396,58 @@ def _csv_floats(value: str, line_no: int, display: str, key: str, count: int = 3
     return np.array([float(t) for t in tokens])
 
 
+_TIME_CHUNK = 1 << 20
+
+
+def _chunks(n: int):
+    for a in range(0, n, _TIME_CHUNK):
+        yield a, min(n, a + _TIME_CHUNK)
+
+
 def _csv_time_rate(time: np.ndarray, rate: float | None, display: str) -> float:
+    """The sample rate the ``time`` column gives (least-squares slope of sample number
+    over time), checked for uniform spacing and against ``rate``; in chunks, so the
+    temporaries stay small beside a long table."""
     where = f"{display}: column 'time'"
-    if not np.all(np.isfinite(time)):
-        raise RecordingError(f"{where}: holds non-finite values; expected times in seconds")
-    if time.size < 2:
+    n = time.size
+    for a, b in _chunks(n):
+        if not np.all(np.isfinite(time[a:b])):
+            raise RecordingError(f"{where}: holds non-finite values; expected times in seconds")
+    if n < 2:
         if rate is None:
             raise RecordingError(
                 f"{where}: one row cannot give a sample rate; add '# sample_rate_hz: ...'"
             )
         return rate
-    steps = np.diff(time)
-    if np.any(steps <= 0):
-        row = int(np.flatnonzero(steps <= 0)[0]) + 1
-        raise RecordingError(
-            f"{where}: not increasing at data row {row + 1}; expected equally spaced times"
-        )
-    k = np.arange(time.size, dtype=np.float64)
-    kc = k - k.mean()
-    tc = time - time.mean()
-    fs = float(np.dot(kc, kc) / np.dot(kc, tc))  # least-squares slope of k over t
-    deviation = float(np.max(np.abs(tc - kc / fs))) * fs
+    for a, b in _chunks(n - 1):
+        steps = np.diff(time[a : b + 1])
+        if np.any(steps <= 0):
+            row = a + int(np.flatnonzero(steps <= 0)[0]) + 1
+            raise RecordingError(
+                f"{where}: not increasing at data row {row + 1}; expected equally spaced times"
+            )
+    k_mean = (n - 1) / 2.0
+    t_mean = float(np.mean(time))
+    skk = skt = 0.0
+    for a, b in _chunks(n):
+        kc = np.arange(a, b, dtype=np.float64) - k_mean
+        skk += float(np.dot(kc, kc))
+        skt += float(np.dot(kc, time[a:b] - t_mean))
+    fs = skk / skt  # least-squares slope of k over t
+    deviation = 0.0
+    for a, b in _chunks(n):
+        kc = np.arange(a, b, dtype=np.float64) - k_mean
+        deviation = max(deviation, float(np.max(np.abs(time[a:b] - t_mean - kc / fs))) * fs)
     if deviation > 0.1:
         raise RecordingError(
             f"{where}: spacing not uniform (a sample is {deviation:.2g} sample periods off); expected a constant sample rate"
         )
     if rate is None:
         return fs
-    deviation = float(np.max(np.abs(time - time[0] - k / rate))) * rate
+    deviation = 0.0
+    for a, b in _chunks(n):
+        k = np.arange(a, b, dtype=np.float64)
+        deviation = max(deviation, float(np.max(np.abs(time[a:b] - time[0] - k / rate))) * rate)
     if deviation > 0.5:
         raise RecordingError(
             f"{where}: spacing gives {fs:.6g} Hz but sample_rate_hz says {rate:.6g} Hz; expected them to agree"
