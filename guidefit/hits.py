@@ -66,8 +66,9 @@ order (the first two end the assessment; the others are all reported):
     at least 2 % of the record (16 samples or more) long, while just before
     that run it still rang: above 4 quantisation steps (the channel's LSB:
     the smallest step between its distinct values; for unquantised data a
-    tiny number) and, in RMS, above 3 times its pre-trigger noise (a response
-    that had decayed into its noise lost nothing when the rest was cut). A real decaying response is never exactly constant:
+    tiny number), above 0.1 % of its peak, and, in RMS, above 3 times its
+    pre-trigger noise (a response that had decayed into its noise, or 60 dB
+    down, lost nothing that matters when the rest was cut). A real decaying response is never exactly constant:
     quantised, it becomes constant only once it has decayed below one LSB,
     and because it took the whole time since the trigger to decay from its
     peak to that level, its amplitude in the last 1/32 of that time (the
@@ -612,7 +613,8 @@ def _assess_rows(columns, run: Run, s: HitSettings, pre: int | None, median_peak
         if quiet:
             start = columns[c][quiet] - base(c)
             noise = math.sqrt(np.add.reduce(np.square(start, out=start)) / start.size)
-        tail = _flat_end(columns[c], pre, noise)
+        peak_c = float(max(tops[c] - base(c), base(c) - bottoms[c]))
+        tail = _flat_end(columns[c], pre, noise, peak_c)
         if tail is not None:
             k, value, lsbs = tail
             flat.append(
@@ -804,17 +806,22 @@ FLAT_END_MIN_FRACTION = 0.02
 """Shortest constant end of a response, as a fraction of the record, that ``flat_end`` judges."""
 FLAT_END_MAX_LSB = 4.0
 """Largest amplitude, in LSB, a response may have just before a constant end."""
+FLAT_END_MIN_PEAK_FRACTION = 1e-3
+"""A constant end after the response fell below this fraction of its peak cut nothing that matters."""
 
 
-def _flat_end(x: np.ndarray, trigger: int, noise_rms: float = 0.0) -> tuple[int, float, float] | None:
+def _flat_end(
+    x: np.ndarray, trigger: int, noise_rms: float = 0.0, peak: float = 0.0
+) -> tuple[int, float, float] | None:
     """(first sample, value, amplitude before in LSB) of a constant end of ``x`` cut while ringing.
 
     The end counts when the last ``max(16, 2 %)`` samples or more equal the last
     one exactly, and in the window of ``max(8, (k - trigger) // 32)`` samples
     before it (k: where the constant run starts) the channel deviates from that
-    value by more than :data:`FLAT_END_MAX_LSB` quantisation steps and its RMS
-    about it exceeds 3 times ``noise_rms`` (the pre-trigger noise): it still
-    rang. See the module docstring for why a real quantised decay never does.
+    value by more than :data:`FLAT_END_MAX_LSB` quantisation steps and by more
+    than :data:`FLAT_END_MIN_PEAK_FRACTION` of ``peak`` (the channel's largest
+    excursion from its baseline), and its RMS about it exceeds 3 times
+    ``noise_rms`` (the pre-trigger noise): it still rang. See the module docstring for why a real quantised decay never does.
     """
     n = x.size
     need = max(16, math.ceil(FLAT_END_MIN_FRACTION * n))
@@ -832,6 +839,8 @@ def _flat_end(x: np.ndarray, trigger: int, noise_rms: float = 0.0) -> tuple[int,
         return None  # the response never rang before it froze
     window = x[k - width : k] - value
     amplitude = float(np.max(np.abs(window)))
+    if amplitude <= FLAT_END_MIN_PEAK_FRACTION * peak:
+        return None  # cut 60 dB down: less than 1e-6 of the response's energy was lost
     if math.sqrt(float(np.mean(np.square(window)))) <= 3.0 * noise_rms:
         return None  # it had decayed into its noise: nothing of the response was cut
     steps = np.diff(np.unique(x))
