@@ -198,3 +198,23 @@ def test_cli_gives_one_line_for_a_hostile_link(tmp_path):
                           capture_output=True, text=True, check=False, timeout=120)
     assert done.returncode == 2
     assert len(done.stderr.strip().splitlines()) == 1 and "not a regular file" in done.stderr
+
+
+def test_soft_link_to_an_external_link_to_a_fifo_is_refused(tmp_path):
+    os.mkfifo(tmp_path / "pipe.h5")
+    path = tmp_path / "soft.h5"
+    with h5py.File(path, "w") as f:
+        f.attrs["format"] = "guidefit-recording"
+        f.attrs["format_version"] = 1
+        f["elsewhere"] = h5py.ExternalLink("pipe.h5", "/runs/vertical")
+        f.create_group("runs")["vertical"] = h5py.SoftLink("/elsewhere")
+    with pytest.raises(RecordingError, match="not a regular file"):
+        read_recording(path)
+
+
+def test_soft_linked_run_reads_its_target(tmp_path):
+    path = _data_file(tmp_path / "data.h5")
+    with h5py.File(path, "r+") as f:
+        f["runs"]["alias"] = h5py.SoftLink("/runs/lateral")
+    runs = {r.name: r for r in read_recording(path).runs}
+    np.testing.assert_array_equal(runs["alias"].read_block(), runs["lateral"].read_block())

@@ -69,8 +69,17 @@ and optionally
 Each :class:`Channel` carries its own ``scale_to_si`` (file unit -> SI),
 so a reader of volts gives the sensitivity there (N per V, m/s^2 per V):
 :func:`read_block` and friends return ``float64(raw) * scale_to_si``.
+``Channel.unit`` stays the channel's physical unit of the contract (``N``,
+``m/s^2``, ``g``); ``Run.to_data()`` and the writers convert samples stored
+in other units (volts, counts) into it, so a converted file is right.
 :meth:`Run.from_header` builds a run from a validated :class:`RunData`
-header, a source and the scale factors. Errors a source raises from its
+header, a source and the scale factors, e.g. a force sensor of 2.25 mV/N
+and an accelerometer of 10.2 mV/(m/s^2), both recorded in volts::
+
+    header = RunData("vertical", 51200.0, [0, -1, 0], ["force", "acc_A_y"],
+                     ["N", "m/s^2"], positions_m, directions)       # no data
+    run = Run.from_header(header, my_source, n_samples=n, file=display,
+                          scale_to_si=[1 / 2.25e-3, 1 / 10.2e-3])  # N/V, (m/s^2)/V Errors a source raises from its
 library (``OSError``, ``KeyError``, ``RuntimeError``, ``ValueError``,
 ``TypeError``) become one ``RecordingError`` naming the file and run.
 Built in: :class:`~guidefit.io.records.ArraySource` (in memory: CSV, UFF)

@@ -320,15 +320,18 @@ def _scaled(channels, value, where: str):
     )
 
 
-def _check_link(parent, key: str, where: str) -> None:
+def _check_link(parent, key: str, where: str, depth: int = 0) -> None:
     """An external link ``parent/key`` must lead to an existing regular file.
 
-    Checked before anything follows the link (a FIFO would block the reader). The
-    object is then reached through the link under the name it has in ``parent``'s
-    file: a master file may link runs of other files under other names.
+    Checked before anything follows the link (a FIFO would block the reader); a
+    soft link is checked along the path it names. The object is then reached
+    through the link under the name it has in ``parent``'s file: a master file
+    may link runs of other files under other names.
     """
     import h5py
 
+    if depth > 16:
+        raise RecordingError(f"{where}: links nested more than 16 deep; refused")
     try:
         link = parent.get(key, getlink=True)
     except (KeyError, RuntimeError, OSError, ValueError):
@@ -336,6 +339,17 @@ def _check_link(parent, key: str, where: str) -> None:
     if isinstance(link, h5py.ExternalLink):
         target = _linked_file(link.filename, parent.file.filename)
         _regular_file(target, where, f"external link '{key}' to file")
+    elif isinstance(link, h5py.SoftLink):
+        path = link.path if link.path.startswith("/") else f"{parent.name.rstrip('/')}/{link.path}"
+        node = parent.file
+        for part in [c for c in path.split("/") if c]:
+            _check_link(node, part, where, depth + 1)
+            try:
+                node = node.get(part)
+            except (KeyError, RuntimeError, OSError, ValueError):
+                return
+            if not isinstance(node, h5py.Group):
+                return
 
 
 def _get_checked(parent, key: str, where: str):
