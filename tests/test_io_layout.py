@@ -7,6 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import guidefit
@@ -160,3 +161,53 @@ def test_compatibility_modules_keep_every_public_name():
         assert getattr(guidefit.uff, name) is getattr(guidefit.io.uff, name)
     assert guidefit.frf_io.write_frfs is guidefit.io.write_frfs
     assert guidefit.read_recording is guidefit.io.read_recording
+
+
+class _VoltSource:
+    """A source that is not built in: only ``read(index)`` and ``dtype`` (the protocol)."""
+
+    def __init__(self, volts):
+        self._volts = volts
+        self.dtype = volts.dtype
+        self.reads = 0
+
+    def read(self, index):
+        self.reads += 1
+        return self._volts[index]
+
+
+def test_a_source_with_read_and_dtype_only_works_everywhere(tmp_path):
+    """Volts in the file, the sensitivities in scale_to_si: every reader path, the hit
+    check and a conversion to the contract give SI / contract units."""
+    from guidefit.hits import iter_hits
+    from guidefit.io import Recording, Run, RunData, open_reader, read_hit, read_recording, write_recording
+
+    rng = np.random.default_rng(0)
+    n, fs = 2000, 50_000.0
+    t = np.arange(n) / fs
+    force_n = np.where((t > 1e-3) & (t < 1.2e-3), 200 * np.sin(np.pi * (t - 1e-3) / 2e-4), 0.0)
+    acc = np.where(t > 1e-3, 30 * np.exp(-(t - 1e-3) / 4e-3) * np.sin(2 * np.pi * 2500 * (t - 1e-3)), 0.0)
+    si = np.stack([np.column_stack([force_n, acc]) * g for g in (1.0, 0.8, 1.2)])
+    si += rng.normal(0, 1e-3, si.shape)
+    sensitivity = np.array([2.25e-3, 10.2e-3])  # V/N, V/(m/s^2)
+    source = _VoltSource((si * sensitivity).astype(np.float32))
+    header = RunData("vertical", fs, [0, -1, 0], ["force", "acc_A_y"], ["N", "m/s^2"],
+                     [[0, 0, 0], [0.03, 0, 0.045]], [[0, -1, 0], [0, 1, 0]], layout="hits",
+                     pretrigger_samples=40)
+    run = Run.from_header(header, source, n_samples=n, n_hits_stored=3, file="volts.tdms",
+                          scale_to_si=1 / sensitivity)
+    assert run.sample_dtype == np.float32
+    np.testing.assert_allclose(read_hit(run, 1), si[1], rtol=1e-6, atol=1e-6)
+    with open_reader(run) as reader:
+        out = np.empty((2, n, 2), dtype=np.float32)
+        raw = reader.read_hits_raw(1, 3, out=out)
+        np.testing.assert_allclose(raw.astype(float) * run.scale_to_si, si[1:], rtol=1e-6, atol=1e-6)
+        np.testing.assert_allclose(reader.read_hits(0, 3, [1]), si[:, :, 1:], rtol=1e-6, atol=1e-6)
+    hits = list(iter_hits(run))
+    assert [h.accepted for h in hits] == [True, True, True], [h.reason for h in hits]
+    write_recording(tmp_path / "converted.h5", Recording("volts.tdms", "MRB35", "", (run,)))
+    back = read_recording(tmp_path / "converted.h5").runs[0]
+    assert [ch.unit for ch in back.channels] == ["N", "m/s^2"] and back.scale_to_si.tolist() == [1.0, 1.0]
+    np.testing.assert_allclose(read_hit(back, 2), si[2], rtol=1e-6, atol=1e-6)
+    with pytest.raises(RecordingError, match="scale_to_si"):
+        Run.from_header(header, source, n_samples=n, scale_to_si=[1.0, 0.0])

@@ -218,3 +218,12 @@ def test_soft_linked_run_reads_its_target(tmp_path):
         f["runs"]["alias"] = h5py.SoftLink("/runs/lateral")
     runs = {r.name: r for r in read_recording(path).runs}
     np.testing.assert_array_equal(runs["alias"].read_block(), runs["lateral"].read_block())
+
+
+def test_reading_while_the_caller_holds_the_dataset_open(tmp_path):
+    path = _data_file(tmp_path / "data.h5", "hits")
+    with h5py.File(path, "r") as f:
+        held = f["runs/vertical/hits"]
+        run = read_recording(path).run("vertical")
+        with open_reader(run) as reader:
+            np.testing.assert_array_equal(reader.read_hits(0, 2), held[...])

@@ -137,14 +137,26 @@ class _H5Handle:
 
 
 def _open_dataset(f, path: str, chunk_cache: bool = True):
-    """The dataset at ``path`` (links followed, as HDF5 does) with external raw storage
-    and virtual-dataset sources resolved against the folder of the file that holds the
-    dataset (``${ORIGIN}``), never against the current working directory."""
+    """The dataset at ``path`` (links followed, as HDF5 does).
+
+    A dataset with external raw storage or virtual-dataset sources is opened with
+    those resolved against the folder of the file that holds it (``${ORIGIN}``),
+    never against the current working directory. Others are opened plainly (HDF5
+    refuses a second open of a dataset with another external-file prefix, so a
+    caller holding the dataset open through h5py keeps working).
+    """
     import h5py
 
+    plain = h5py.h5d.open(f.id, path.encode())
+    create = plain.get_create_plist()
+    special = create.get_layout() == h5py.h5d.VIRTUAL or create.get_external_count() > 0
+    if not special and chunk_cache:
+        return h5py.Dataset(plain)
+    del plain, create  # closed: the open below may set other access properties
     access = h5py.h5p.create(h5py.h5p.DATASET_ACCESS)
-    access.set_efile_prefix(b"${ORIGIN}")
-    access.set_virtual_prefix(b"${ORIGIN}")
+    if special:
+        access.set_efile_prefix(b"${ORIGIN}")
+        access.set_virtual_prefix(b"${ORIGIN}")
     if not chunk_cache:
         access.set_chunk_cache(0, 0, 1.0)
     return h5py.Dataset(h5py.h5d.open(f.id, path.encode(), dapl=access))
