@@ -394,15 +394,21 @@ def explain_cmd(recording, modes_path, guide_name, candidates, as_json, plot_pat
     source = modes_path or recording
     from guidefit.errors import GuideError
 
+    ident = None
     with report.spinner("explaining", enabled=not as_json) as progress:
         try:
-            result = explain(source, guide=guide_name, candidates=names, progress=progress, settings=settings)
+            if recording is not None:  # explain(recording) in two steps: the plot shows this identification
+                from guidefit.explain import identify_for_explain
+
+                ident = identify_for_explain(recording, guide=guide_name, settings=settings)
+            result = explain(source if ident is None else ident, guide=guide_name, candidates=names, progress=progress,
+                             settings=settings)
         except GuideError as exc:
             if guide_name is not None:
                 raise
             raise _named_guide_error(source, exc) from None
     if plot_path:
-        report.plot_explanation_with_frf(result, plot_path, recording)
+        report.plot_explanation_with_frf(result, plot_path, ident)
     if as_json:
         click.echo(report.dump_json(result.to_dict()))
     else:

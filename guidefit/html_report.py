@@ -17,8 +17,9 @@ that identification. The page then renders those two results:
 - the modes, and their shapes at the sensors (points A-D) as a table and a
   figure of the measured modal constants;
 - the explain result: verdict, RMS error before and after, the effects, the
-  per-mode table, the ranked candidates and the explain figure (its FRF panel
-  uses the identification's FRF and its identified damping ratios);
+  per-mode table, the ranked candidates and the ``explain --plot`` figure
+  (:func:`guidefit.report.plot_explanation_with_frf`: its FRF panel uses the
+  identification's FRF and its identified damping ratios);
 - the joint ``guidefit export`` writes (:func:`guidefit.export.explained_joint`):
   apparent Eq. (24)-(29) values beside the explained joint with the rig
   removed, and its 6x6 stiffness and damping;
@@ -322,49 +323,9 @@ def plot_shapes(identification, path) -> None:
     plt.close(fig)
 
 
-def _overlay(res: ReportResults) -> dict | None:
-    """The explain figure's FRF panel from the identification itself: no FRF is recomputed.
-
-    The measured FRF is the first run's channel with the largest response;
-    the model before and after uses the identified damping ratio of each
-    labelled mode (the mean of them for modes not identified).
-    """
-    import numpy as np
-
-    from guidefit.explain import fitted_spec
-    from guidefit.model import vibration as vib
-    from guidefit.recording import read_recording
-
-    ident, explanation = res.identification, res.explanation
-    run = ident.runs[0]
-    frf = run.frf
-    k = int(np.argmax(np.max(np.abs(frf.H), axis=0)))
-    ch = run.channels[k]
-    rec_run = read_recording(res.path).run(run.name)
-    hit = rec_run.excitation_position_m if rec_run.excitation_position_m is not None else np.zeros(3)
-    zeta = {m.label: m.damping_ratio for m in ident.modes}
-    fill = float(np.mean(list(zeta.values()))) if zeta else 0.02
-    f = frf.frequency_hz
-    top = min(f[-1], 1.4 * max((m.frequency_hz for m in ident.modes), default=f[-1]))
-    band = (f > 0) & (f <= top)
-
-    def model(spec):
-        sol = vib.solve_modes(spec)
-        z = [zeta.get(lab, fill) for lab in sol.labels]
-        return vib.accelerance(sol, spec, f[band], z, hit, run.excitation_direction, [ch.position_m],
-                               [ch.direction])[:, 0]
-
-    out = {"frequency_hz": f[band], "measured": frf.H[band, k],
-           "before": model(vib.model_from_guide(ident.guide)),
-           "title": f"run '{run.name}', {ch.name} (identified damping)"}
-    if explanation.verdict == "explained":
-        out["after"] = model(fitted_spec(explanation, ident.guide))
-    return out
-
-
 def _explanation(res: ReportResults) -> list[str]:
     from guidefit.explain import plot_explanation
-    from guidefit.report import fmt
+    from guidefit.report import fmt, frf_overlay
 
     parts = ["<h2>Explanation of the model-measurement residual</h2>"]
     if res.explanation is None:
@@ -399,7 +360,7 @@ def _explanation(res: ReportResults) -> list[str]:
     for note in data.get("notes", []):
         parts.append(f"<p>{_e(note)}</p>")
     try:
-        overlay = _overlay(res)
+        overlay = frf_overlay(res.identification, res.explanation)
     except Exception as exc:  # noqa: BLE001 - the FRF panel is optional; say why it is missing
         overlay = None
         parts.append(f"<p class='warn'>FRF panel left out ({_e(type(exc).__name__)}: {_e(exc)})</p>")

@@ -418,48 +418,58 @@ def render_explanation(result, console=None) -> None:
         console.print(f"note: {note}")
 
 
-def plot_explanation_with_frf(result, path: str, recording=None) -> None:
-    """The explain plot; with a recording, a measured FRF against the model before and after."""
+def plot_explanation_with_frf(result, path, identification=None) -> None:
+    """The explain plot; with the identification it explained, its FRF against the model before and after."""
     from guidefit.explain import plot_explanation
 
     overlay = None
-    if recording is not None:
+    if identification is not None:
         try:
-            overlay = _frf_overlay(result, recording)
+            overlay = frf_overlay(identification, result)
         except Exception as exc:  # noqa: BLE001 - the overlay is optional; say why it is missing
             _console(stderr=True).print(f"note: FRF overlay left out ({type(exc).__name__}: {exc})")
     plot_explanation(result, path, frf=overlay)
 
 
-def _frf_overlay(result, recording) -> dict:
-    """Measured FRF of the channel that shows the vertical mode most, and the model's before/after."""
+def frf_overlay(identification, explanation) -> dict:
+    """The FRF panel of the explain plot, from the identification itself: no FRF is recomputed.
+
+    The measured FRF is the first run's channel with the largest response;
+    the model before (nominal) and after (fitted effects, when explained)
+    uses the identified damping ratio of each labelled mode (the mean of them
+    for modes not identified), over the band the identify plot shows.
+    """
     import numpy as np
 
     from guidefit.explain import fitted_spec
-    from guidefit.identify import IdentifySettings, frf_of_recording
     from guidefit.model import vibration as vib
-    from guidefit.model.guides import load_guide
     from guidefit.recording import read_recording
 
-    rec = read_recording(recording)
-    frfsets, _ = frf_of_recording(recording, IdentifySettings(jackknife=False))
-    frf, run = frfsets[0], rec.runs[0]
+    ident = identification
+    run = ident.runs[0]
+    frf = run.frf
+    k = int(np.argmax(np.max(np.abs(frf.H), axis=0)))
+    ch = run.channels[k]
+    rec_run = read_recording(ident.file).run(run.name)  # metadata only: the hit point
+    hit = rec_run.excitation_position_m if rec_run.excitation_position_m is not None else np.zeros(3)
+    zeta = {}
+    for m in ident.modes:
+        if getattr(m, "level", None) is None:
+            zeta.setdefault(m.label, m.damping_ratio)
+    fill = float(np.mean(list(zeta.values()))) if zeta else 0.02
     f = frf.frequency_hz
-    band = (f > 300) & (f < 8000)
-    k = int(np.argmax(np.max(np.abs(frf.H[band]), axis=0)))
-    ch = next(c for c in run.channels if c.name == frf.channels[k])
-    guide = load_guide(result.guide)
-    damping = {m.get("label"): 0.02 for m in result.to_dict()["modes"]}
-    hit = run.excitation_position_m if run.excitation_position_m is not None else (0.0, 0.0, 0.0)
+    top = min(f[-1], 1.4 * max((m.frequency_hz for m in ident.modes), default=f[-1]))
+    band = (f > 0) & (f <= top)
 
     def model(spec):
         sol = vib.solve_modes(spec)
-        zeta = [damping.get(lab, 0.02) for lab in sol.labels]
-        return vib.accelerance(sol, spec, f[band], zeta, hit, run.excitation_direction,
-                               [ch.position_m], [ch.direction])[:, 0]
+        z = [zeta.get(lab, fill) for lab in sol.labels]
+        return vib.accelerance(sol, spec, f[band], z, hit, run.excitation_direction, [ch.position_m],
+                               [ch.direction])[:, 0]
 
-    out = {"frequency_hz": f[band], "measured": frf.H[band, k], "before": model(vib.model_from_guide(guide)),
-           "title": f"run '{run.name}', {ch.name} (model damping 2 %)"}
-    if result.verdict == "explained":
-        out["after"] = model(fitted_spec(result, guide))
+    out = {"frequency_hz": f[band], "measured": frf.H[band, k],
+           "before": model(vib.model_from_guide(ident.guide)),
+           "title": f"run '{run.name}', {ch.name} (identified damping)"}
+    if explanation.verdict == "explained":
+        out["after"] = model(fitted_spec(explanation, ident.guide))
     return out

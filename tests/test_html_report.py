@@ -142,3 +142,17 @@ def test_report_renders_in_headless_chromium(report, tmp_path):
                     "Mode shapes at the measuring points", "Explanation of the model-measurement residual", "Hits"):
         assert heading in dom, heading
     assert dom.count("<img") >= 3
+
+
+def test_explain_plot_draws_the_identification_it_explained(tmp_path, monkeypatch):
+    """explain --plot used to re-run the FRFs (fixed 300-8000 Hz band, 2 % model damping); now it reuses them."""
+    import guidefit.identify
+
+    def no_recomputation(*args, **kwargs):
+        raise AssertionError("FRFs recomputed for the plot")
+
+    monkeypatch.setattr(guidefit.identify, "frf_of_recording", no_recomputation)
+    png = tmp_path / "explain.png"
+    result = CliRunner().invoke(main, ["explain", str(SAMPLE), "--no-jackknife", "--plot", str(png)])
+    assert result.exit_code == 0, result.output
+    assert "overlay left out" not in result.output and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
