@@ -167,6 +167,7 @@ class Identification:
     extra_modes: tuple = ()
     missing_modes: tuple = ()
     failed_run_hits: tuple = ()  # hit rows of runs that gave no FRF (every hit rejected)
+    hits_checked: bool = True  # False: identified from an FRF file (no time data, no hit checks)
 
     def hit_rows(self) -> list[dict]:
         """Every hit of every run, accepted or rejected, including runs that gave no FRF."""
@@ -183,6 +184,7 @@ class Identification:
             "extra_modes": [m.to_dict() for m in self.extra_modes],
             "missing_modes": list(self.missing_modes),
             "hits": self.hit_rows(),
+            "hits_checked": self.hits_checked,
             "sensors": [
                 {"name": ch.name, "position_m": [float(x) for x in ch.position_m],
                  "direction": [float(x) for x in ch.direction]}
@@ -822,13 +824,33 @@ def run_frfs(recording, settings: IdentifySettings, warnings: list, failed: list
         yield run, frf, rows
 
 
+def file_frfs(frf_file, settings: IdentifySettings, warnings: list):
+    """Yield (run, FrfSet, no hit rows) for every run of an FRF file; what it lacks goes to ``warnings``.
+
+    The modal stage then runs on them as on :func:`run_frfs`' FRFs. Another
+    estimator than the file's is used where its jackknife sums allow.
+    """
+    warnings.extend(frf_file.notes)
+    for run, frf in zip(frf_file.recording.runs, frf_file.frfsets):
+        if settings.estimator != frf.estimator:
+            if frf.n_groups >= 1:
+                frf = frf.with_estimator(settings.estimator)
+            else:
+                warnings.append(f"run '{run.name}': the file holds {frf.estimator} FRFs; estimator "
+                                f"{settings.estimator} needs the spectral sums (not in the file)")
+        yield run, frf, []
+
+
 def identify(path, guide=None, settings: IdentifySettings | None = None) -> Identification:
-    """Identify the joint modes and K_V, K_H, c_V, c_H of one recording.
+    """Identify the joint modes and K_V, K_H, c_V, c_H of one recording (or of FRFs measured from one).
 
     Parameters
     ----------
     path : str or Path
-        HDF5 or CSV recording in the contract format.
+        A recording in any registered format, or FRFs: guidefit's ``frf.h5``
+        or UFF-58 FRFs (:func:`guidefit.io.frf_files.read_input`). From FRFs the
+        pipeline starts at the modal fit: no hit checks (``hits_checked``
+        False), and without jackknife sums in the file the std is the fit's own.
     guide : str, Path or Guide, optional
         Overrides the file's ``guide`` attribute (default MRB35 when neither is given).
     settings : IdentifySettings, optional
@@ -842,10 +864,12 @@ def identify(path, guide=None, settings: IdentifySettings | None = None) -> Iden
     """
     from guidefit.model import vibration as vib
     from guidefit.model.guides import Guide, load_guide
-    from guidefit.recording import read_recording
+    from guidefit.io.frf_files import FrfFile, read_input
 
     settings = settings or IdentifySettings()
-    recording = read_recording(path)
+    source = read_input(path)
+    from_frfs = isinstance(source, FrfFile)
+    recording = source.recording if from_frfs else source
     if not isinstance(guide, Guide):
         guide = load_guide(guide or recording.guide or "MRB35")
     model = vib.solve_modes(vib.model_from_guide(guide))
@@ -853,7 +877,9 @@ def identify(path, guide=None, settings: IdentifySettings | None = None) -> Iden
     runs = []
     all_modes: list[IdentifiedMode] = []
     failed_rows: list[dict] = []
-    for run, frf, rows in run_frfs(recording, settings, warnings, failed_rows):
+    frfs = file_frfs(source, settings, warnings) if from_frfs else run_frfs(recording, settings, warnings,
+                                                                           failed_rows)
+    for run, frf, rows in frfs:
         modes = _fit_run(run, frf, guide, model, settings, warnings)
         all_modes.extend(modes)
         levels = _force_levels(run, frf, rows, modes, settings, warnings) if settings.force_levels else []
@@ -874,7 +900,7 @@ def identify(path, guide=None, settings: IdentifySettings | None = None) -> Iden
     _excitation_warnings(modes, {r.name: r.frf for r in runs}, warnings)
     params = joint_parameters(guide.mass_kg, joint)
     return Identification(str(path), guide, tuple(runs), tuple(modes), params, tuple(warnings),
-                          tuple(extras), tuple(missing), tuple(failed_rows))
+                          tuple(extras), tuple(missing), tuple(failed_rows), hits_checked=not from_frfs)
 
 
 
@@ -884,11 +910,14 @@ def frf_of_recording(path, settings: IdentifySettings | None = None):
 
     Raises :class:`IdentificationError` when no run gives an FRF.
     """
-    from guidefit.recording import read_recording
+    from guidefit.io.frf_files import FrfFile, read_input
 
     settings = settings or IdentifySettings()
     warnings: list[str] = []
-    frfsets = [frf for _run, frf, _rows in run_frfs(read_recording(path), settings, warnings)]
+    source = read_input(path)
+    frfs = file_frfs(source, settings, warnings) if isinstance(source, FrfFile) else run_frfs(source, settings,
+                                                                                              warnings)
+    frfsets = [frf for _run, frf, _rows in frfs]
     if not frfsets:
         raise IdentificationError(f"{path}: no run gave an FRF ({'; '.join(warnings) or 'no hits'})")
     return frfsets, warnings

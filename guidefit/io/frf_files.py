@@ -1,30 +1,604 @@
-"""FRF files: guidefit's own ``frf.csv`` and ``frf.h5`` (UFF-58 FRFs: :mod:`guidefit.io.uff`).
+"""FRF files: guidefit's own ``frf.csv`` and ``frf.h5`` written and read; FRF files as input.
 
 The layouts are documented with their writers,
-:func:`guidefit.frf.write_frf_csv` and :func:`guidefit.frf.write_frf_h5`
-(reader :func:`guidefit.frf.read_frf_h5`); this module declares them to the
-registry, so :func:`guidefit.io.write_frfs` picks the writer by suffix.
+:func:`guidefit.frf.write_frf_csv` and :func:`guidefit.frf.write_frf_h5`;
+this module declares them to the registry, so :func:`guidefit.io.write_frfs`
+picks the writer by suffix. ``frf.h5`` written through the registry (``guidefit
+frf rec.h5 --out frf.h5``) also carries what the recording knew about each run
+(optional attributes, format version unchanged)::
+
+    /frf                         attrs guide (str), source_file (str)
+    /frf/<run>                   attrs excitation_direction (3,), excitation_position_m (3,) NaN if unknown,
+                                       positions_m (R, 3), directions (R, 3): the columns of H
+
+FRFs as input
+-------------
+:func:`read_input` opens what ``guidefit identify`` / ``explain`` / ``report``
+are given: a recording (time data, :func:`guidefit.io.read_recording`) or an
+:class:`FrfFile`, i.e. FRFs measured elsewhere or by ``guidefit frf``:
+
+* ``frf.h5`` (guidefit's own, :func:`read_frf_h5_file`): the FrfSets exactly
+  as written, with their jackknife group sums when the file has them;
+* UFF-58 function type 4 records (:mod:`guidefit.io.uff_frf`), with the
+  coherences (type 6) at the same DOFs where present.
+
+An :class:`FrfFile` holds one ``FrfSet`` per run and a metadata-only
+:class:`~guidefit.io.records.Recording` (runs with the force and response
+channels, their positions and directions, the excitation direction, the sample
+rate; no samples: reading one is a ``RecordingError``), so the modal stage of
+:mod:`guidefit.identify` runs on it as on FRFs computed from a recording.
+``notes`` say what the file does not carry (hit checks are never possible).
+
+guidefit's ``frf.csv`` is refused as input with one line: it carries no
+excitation direction, no sensor geometry, no number of averages and no
+exponential-window time constant (so the damping could not be corrected).
 """
 
 from __future__ import annotations
 
+import math
+import os
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from guidefit.errors import RecordingError
 from guidefit.io.registry import FileFormat
 
-__all__ = ["write_frf_csv_file", "write_frf_h5_file"]
+__all__ = [
+    "FrfFile",
+    "frf_run",
+    "holds_frfs",
+    "infer_excitation_direction",
+    "read_frf_file",
+    "read_frf_h5_file",
+    "read_input",
+    "read_metadata",
+    "write_frf_csv_file",
+    "write_frf_h5_file",
+]
+
+FRF_H5_FORMAT = "guidefit-frf"
+MIN_FRF_BINS = 8
+"""Fewer frequency bins than this in an FRF is refused."""
+
+NOTE_NO_HITS = "no hit checks were possible: the input holds FRFs, not time data"
+
+
+@dataclass(frozen=True, eq=False)
+class FrfFile:
+    """FRFs read from a file, one ``FrfSet`` per run, with their run and channel metadata.
+
+    Attributes
+    ----------
+    path : str
+        The path as given.
+    format : str
+        The :class:`~guidefit.io.registry.FileFormat` name.
+    recording : guidefit.io.records.Recording
+        Metadata only (layout ``"frf"``, no samples): per run the force and
+        response channels with positions and directions, the excitation
+        direction and the sample rate.
+    frfsets : tuple of guidefit.frf.FrfSet
+        In the order of ``recording.runs`` (same run names); accelerance in
+        (m/s^2)/N.
+    notes : tuple of str
+        What the file does not carry, one sentence each (shown as warnings).
+    """
+
+    path: str
+    format: str
+    recording: object
+    frfsets: tuple
+    notes: tuple = ()
+
+    @property
+    def guide(self) -> str | None:
+        """The guide the file names (None if it names none)."""
+        return self.recording.guide
+
+    def has_group_sums(self) -> bool:
+        """Every run carries jackknife group sums (>= 3 groups): hit-to-hit scatter is available."""
+        return all(getattr(f, "n_groups", 0) >= 3 for f in self.frfsets)
+
+
+class _NoSamples:
+    """The source of a metadata-only run: an FRF file holds no time data."""
+
+    dtype = np.dtype(np.float64)
+
+    def __init__(self, display: str):
+        self.display = display
+
+    def read(self, index):
+        raise RecordingError(f"{self.display}: holds FRFs, not time data; no samples to read")
+
+
+# ------------------------------------------------------------------ metadata
+
+
+def infer_excitation_direction(frf) -> np.ndarray:
+    """+x or +y: the axis whose response channels carry most of the FRF energy.
+
+    For files that do not say which way the hammer pointed. Only the sign
+    convention of the shapes and which run is preferred for a mode depend on it.
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace
+    >>> frf = SimpleNamespace(channels=("acc_A_x", "acc_A_y"), H=np.array([[1.0, 3.0], [1.0, 2.0]]))
+    >>> infer_excitation_direction(frf).tolist()
+    [0.0, 1.0, 0.0]
+    """
+    energy = np.sum(np.abs(np.asarray(frf.H)) ** 2, axis=0)
+    by_axis = {"x": 0.0, "y": 0.0}
+    for name, e in zip(frf.channels, energy):
+        axis = name.rsplit("_", 1)[-1]
+        if axis in by_axis:
+            by_axis[axis] += float(e)
+    vec = np.zeros(3)
+    vec[0 if by_axis["x"] > by_axis["y"] else 1] = 1.0
+    return vec
+
+
+def frf_run(display: str, name: str, sample_rate_hz: float, excitation_direction, channels,
+            positions_m=None, directions=None, excitation_position_m=None, guide=None):
+    """A metadata-only :class:`~guidefit.io.records.Run` for the FRFs of ``channels``.
+
+    ``positions_m`` / ``directions`` (R, 3) of the response channels; None: the
+    guide's default points and +axis of each name
+    (:func:`guidefit.io.geometry.default_channel_geometry`). The force channel
+    sits at the hit point (origin if unknown), along the excitation direction.
+
+    Raises
+    ------
+    RecordingError
+        A channel name without point and axis, a direction not a unit vector, ...
+        (one line naming the file and the run).
+    """
+    from guidefit.io.geometry import default_channel_geometry
+    from guidefit.io.records import Run, RunData
+
+    names = ["force", *channels]
+    where = f"{display}: run '{name}'"
+    try:
+        if positions_m is None or directions is None:
+            pos, dirs = default_channel_geometry(names, excitation_direction, excitation_position_m,
+                                                 guide=_known_guide(guide))
+            positions_m = pos[1:] if positions_m is None else positions_m
+            directions = dirs[1:] if directions is None else directions
+        hit = np.zeros(3) if excitation_position_m is None else np.asarray(excitation_position_m, float)
+        header = RunData(name, sample_rate_hz, excitation_direction, names,
+                         ["N"] + ["m/s^2"] * len(channels),
+                         np.vstack([hit, np.asarray(positions_m, float).reshape(-1, 3)]),
+                         np.vstack([np.asarray(excitation_direction, float),
+                                    np.asarray(directions, float).reshape(-1, 3)]),
+                         layout="signals", excitation_position_m=excitation_position_m)
+    except RecordingError as exc:
+        text = str(exc)
+        raise RecordingError(text if text.startswith(display) else f"{where}: {text}") from None
+    run = Run.from_header(header, _NoSamples(display), n_samples=0, file=display)
+    return replace(run, layout="frf")
+
+
+def _known_guide(guide):
+    """The guide name if this installation knows it, else None (MRB35's points)."""
+    if not guide:
+        return None
+    from guidefit.errors import GuidefitError
+    from guidefit.io.geometry import default_points
+
+    try:
+        default_points(guide)
+    except GuidefitError:
+        return None
+    return guide
+
+
+def check_frf_arrays(where: str, frequency_hz, H, coherence, channels) -> tuple:
+    """Validated (frequency_hz, H, coherence) of one run: shapes, finite values, increasing axis.
+
+    Raises
+    ------
+    RecordingError
+        One line naming ``where`` and what is wrong.
+
+    Examples
+    --------
+    >>> f = np.arange(10.0); H = np.ones((10, 1), complex); H[3, 0] = np.nan
+    >>> check_frf_arrays("x.h5: run 'v'", f, H, np.ones((10, 1)), ("acc_A_y",))
+    Traceback (most recent call last):
+    ...
+    guidefit.errors.RecordingError: x.h5: run 'v': H of 'acc_A_y' has 1 non-finite value(s) (first at 3 Hz); an FRF file must hold numbers
+    """
+    f = np.asarray(frequency_hz)
+    if f.ndim != 1 or not np.issubdtype(f.dtype, np.number) or np.iscomplexobj(f):
+        raise RecordingError(f"{where}: frequency_hz has shape {f.shape} ({f.dtype}); expected (F,) real")
+    f = f.astype(np.float64)
+    n_resp = len(channels)
+    H = np.asarray(H)
+    if H.shape != (f.size, n_resp) or not np.issubdtype(H.dtype, np.number):
+        raise RecordingError(f"{where}: H has shape {H.shape}; expected ({f.size}, {n_resp}) "
+                             "(frequencies, response channels)")
+    if not np.iscomplexobj(H):
+        raise RecordingError(f"{where}: H is real ({H.dtype}); an FRF is complex (magnitude and phase)")
+    H = H.astype(np.complex128)
+    coh = np.asarray(coherence)
+    if coh.shape != H.shape or np.iscomplexobj(coh) or not np.issubdtype(coh.dtype, np.number):
+        raise RecordingError(f"{where}: coherence has shape {coh.shape} ({coh.dtype}); expected real {H.shape}")
+    coh = coh.astype(np.float64)
+    if f.size < MIN_FRF_BINS:
+        raise RecordingError(f"{where}: {f.size} frequencies; an FRF needs at least {MIN_FRF_BINS}")
+    if not np.all(np.isfinite(f)) or f[0] < 0 or not np.all(np.diff(f) > 0):
+        raise RecordingError(f"{where}: frequency_hz is not finite, non-negative and increasing")
+    for what, values in (("H", H), ("coherence", coh)):
+        bad = ~np.isfinite(values)
+        if np.any(bad):
+            col = int(np.nonzero(bad.any(axis=0))[0][0])
+            first = float(f[np.nonzero(bad[:, col])[0][0]])
+            raise RecordingError(f"{where}: {what} of '{channels[col]}' has {int(bad[:, col].sum())} "
+                                 f"non-finite value(s) (first at {first:g} Hz); an FRF file must hold numbers")
+    if np.any((coh < -1e-9) | (coh > 1 + 1e-9)):
+        raise RecordingError(f"{where}: coherence outside [0, 1] ({coh.min():g} to {coh.max():g})")
+    if not np.any(H):
+        raise RecordingError(f"{where}: H is zero everywhere")
+    return _frozen(f), _frozen(H), _frozen(np.clip(coh, 0.0, 1.0))
+
+
+def _frozen(a: np.ndarray) -> np.ndarray:
+    a = np.array(a)
+    a.flags.writeable = False
+    return a
+
+
+# ------------------------------------------------------------------ frf.csv / frf.h5 writers
 
 
 def write_frf_csv_file(path, frfsets, *, recording=None) -> None:
-    """:func:`guidefit.frf.write_frf_csv` (``recording`` is not used by CSV)."""
+    """:func:`guidefit.frf.write_frf_csv` (``recording`` is not used by CSV), written whole."""
     from guidefit.frf import write_frf_csv
+    from guidefit.io._checks import _atomic
 
-    write_frf_csv(path, frfsets)
+    _atomic(Path(os.fspath(path)), lambda tmp: write_frf_csv(tmp, frfsets))
 
 
 def write_frf_h5_file(path, frfsets, *, recording=None) -> None:
-    """:func:`guidefit.frf.write_frf_h5` (``recording`` is not used by HDF5)."""
-    from guidefit.frf import write_frf_h5
+    """:func:`guidefit.frf.write_frf_h5`, plus the recording's geometry of each run (module docstring).
 
-    write_frf_h5(path, frfsets)
+    Written to ``<path>.part`` and renamed when complete. ``recording`` (a
+    :class:`~guidefit.io.records.Recording` or a path) gives each run's
+    excitation direction and hit point and the response channels' positions
+    and directions; without it the file holds the FRFs only.
+    """
+    from guidefit.frf import write_frf_h5
+    from guidefit.io._checks import _atomic
+
+    runs = _runs_of(recording)
+
+    def write(tmp: Path) -> None:
+        import h5py
+
+        write_frf_h5(tmp, frfsets)
+        if runs is None:
+            return
+        with h5py.File(tmp, "r+") as f:
+            root = f["frf"]
+            if runs["guide"]:
+                root.attrs["guide"] = runs["guide"]
+            root.attrs["source_file"] = runs["file"]
+            for name, g in root.items():
+                run = runs["runs"].get(name)
+                if run is None:
+                    continue
+                by_name = {ch.name: ch for ch in run.channels}
+                names = [c.decode() if isinstance(c, bytes) else str(c) for c in g.attrs["channels"]]
+                if not all(n in by_name for n in names):
+                    continue
+                g.attrs["excitation_direction"] = np.asarray(run.excitation_direction, float)
+                hit = run.excitation_position_m
+                g.attrs["excitation_position_m"] = np.full(3, np.nan) if hit is None else np.asarray(hit, float)
+                g.attrs["positions_m"] = np.array([by_name[n].position_m for n in names], float)
+                g.attrs["directions"] = np.array([by_name[n].direction for n in names], float)
+
+    _atomic(Path(os.fspath(path)), write)
+
+
+def _runs_of(recording) -> dict | None:
+    if recording is None:
+        return None
+    from guidefit.io.records import Recording
+    from guidefit.io.registry import read_recording
+
+    if not isinstance(recording, Recording):
+        recording = read_recording(recording)
+    return {"guide": recording.guide, "file": os.path.basename(recording.path),
+            "runs": {run.name: run for run in recording.runs}}
+
+
+# ------------------------------------------------------------------ frf.h5 reader
+
+
+def read_frf_h5_file(p: Path, display: str) -> FrfFile:
+    """Read guidefit's ``frf.h5`` as an :class:`FrfFile` (in a time-limited child where possible).
+
+    Runs without stored geometry get the guide's default points, +axis sensor
+    directions and an excitation direction inferred from the responses
+    (:func:`infer_excitation_direction`), each said in ``notes``.
+
+    Raises
+    ------
+    RecordingError
+        Not HDF5, no ``/frf`` group of format ``guidefit-frf``, a run without
+        ``H``/``coherence``/``frequency_hz`` or with mismatched shapes,
+        non-finite values, links or storage outside the file's folder: one line.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from guidefit.frf import frf_from_records
+    >>> t = np.arange(256) / 2000.0
+    >>> force = np.where(t < 2e-3, np.sin(np.pi * t / 2e-3), 0.0)
+    >>> acc = np.convolve(force, np.exp(-40 * t) * np.sin(2 * np.pi * 300 * t))[:256]
+    >>> frf = frf_from_records(np.stack([force, acc], -1)[None], 2000.0, run="vertical",
+    ...                        channel_names=("force", "acc_A_y"))
+    >>> path = Path(tempfile.mkdtemp()) / "frf.h5"
+    >>> write_frf_h5_file(path, [frf])
+    >>> got = read_frf_h5_file(path, str(path))
+    >>> got.recording.runs[0].name, got.frfsets[0].channels, bool(np.allclose(got.frfsets[0].H, frf.H))
+    ('vertical', ('acc_A_y',), True)
+    """
+    from guidefit.io.watchdog import can_fork, in_child, timeout_s
+
+    timeout = timeout_s()
+    if timeout > 0 and can_fork():
+        return in_child(_read_frf_h5_checked, p, display, timeout)
+    return _read_frf_h5_checked(p, display)
+
+
+def _read_frf_h5_checked(p: Path, display: str) -> FrfFile:
+    try:
+        return _read_frf_h5(p, display)
+    except RecordingError:
+        raise
+    except (OSError, RuntimeError, KeyError, ValueError, TypeError) as exc:
+        from guidefit.io._checks import _first_line
+
+        raise RecordingError(f"{display}: damaged FRF file ({_first_line(exc)})") from None
+
+
+def _read_frf_h5(p: Path, display: str) -> FrfFile:
+    import h5py
+
+    from guidefit.io.hdf5 import _h5_open_error
+
+    try:
+        f = h5py.File(p, "r")
+    except OSError as exc:
+        raise _h5_open_error(p, display, exc) from None
+    with f:
+        if "frf" not in f or not isinstance(f["frf"], h5py.Group):
+            raise RecordingError(f"{display}: no group '/frf'; expected guidefit FRFs "
+                                 "(written by 'guidefit frf ... --out frf.h5')")
+        root = f["frf"]
+        fmt = _text(root.attrs.get("format"))
+        if fmt != FRF_H5_FORMAT:
+            raise RecordingError(f"{display}: /frf attribute 'format' is {fmt!r}; expected '{FRF_H5_FORMAT}'")
+        guide = _text(root.attrs.get("guide")) or None
+        names = list(root.keys())
+        if not names:
+            raise RecordingError(f"{display}: /frf holds no run")
+        frfsets, runs, notes = [], [], []
+        for name in names:
+            frf, run, run_notes = _read_h5_run(display, root, name, guide)
+            frfsets.append(frf)
+            runs.append(run)
+            notes += run_notes
+    from guidefit.io.records import Recording
+
+    if not all(s.n_groups >= 3 for s in frfsets):
+        notes.append("the std is the modal fit's own standard error: hit-to-hit scatter is not included "
+                     "(the file has no jackknife group sums of >= 3 groups)")
+    recording = Recording(path=display, guide=guide, description="FRFs (guidefit frf.h5)", runs=tuple(runs))
+    return FrfFile(display, "guidefit FRFs, HDF5", recording, tuple(frfsets), (NOTE_NO_HITS, *notes))
+
+
+def _text(value) -> str:
+    if value is None:
+        return ""
+    if isinstance(value, bytes):
+        return value.decode("utf-8", "replace")
+    if isinstance(value, np.ndarray) and value.size == 1:
+        return _text(value.reshape(-1)[0])
+    return str(value)
+
+
+def _dataset(g, key: str, where: str):
+    from guidefit.io.hdf5 import _check_storage, _get_checked
+
+    import h5py
+
+    if key not in g:
+        raise RecordingError(f"{where}: dataset '{key}' missing")
+    ds = _get_checked(g, key, f"{where}: '{key}'")
+    if not isinstance(ds, h5py.Dataset):
+        raise RecordingError(f"{where}: '{key}' is not a dataset")
+    _check_storage(ds, Path(g.file.filename), f"{where}: '{key}'")
+    return ds[()]
+
+
+def _optional_float(attrs, key: str) -> float | None:
+    if key not in attrs:
+        return None
+    v = float(np.asarray(attrs[key]).reshape(-1)[0])
+    return None if math.isnan(v) else v
+
+
+def _read_h5_run(display: str, root, name: str, guide):
+    import h5py
+
+    from guidefit.frf import FrfSet
+
+    where = f"{display}: run '{name}'"
+    g = root[name]
+    if not isinstance(g, h5py.Group):
+        raise RecordingError(f"{where}: /frf/{name} is not a group")
+    a = g.attrs
+    if "channels" not in a:
+        raise RecordingError(f"{where}: attribute 'channels' missing (the response channel of each column of H)")
+    channels = tuple(_text(c) for c in np.asarray(a["channels"]).reshape(-1))
+    if "force" in channels or len(set(channels)) != len(channels) or not channels:
+        raise RecordingError(f"{where}: channels {list(channels)}; expected distinct response channels "
+                             "(the force is the reference of every FRF)")
+    f, H, coh = check_frf_arrays(where, _dataset(g, "frequency_hz", where), _dataset(g, "H", where),
+                                 _dataset(g, "coherence", where), channels)
+    sums = {}
+    if "group_sums" in g:
+        sums = {k: _dataset(g["group_sums"], k, f"{where}: group_sums") for k in ("Sff", "Sxx", "Sfx", "n_hits")}
+        G = np.asarray(sums["n_hits"]).shape[0]
+        want = {"Sff": (G, f.size), "Sxx": (G, f.size, len(channels)), "Sfx": (G, f.size, len(channels))}
+        for k, shape in want.items():
+            if np.shape(sums[k]) != shape or not np.all(np.isfinite(sums[k])):
+                raise RecordingError(f"{where}: group_sums/{k} has shape {np.shape(sums[k])} or non-finite "
+                                     f"values; expected finite {shape}")
+    estimator = _text(a.get("estimator")) or "H1"
+    n_avg = int(np.asarray(a.get("n_averages", 0)).reshape(-1)[0])
+    rate = _optional_float(a, "sample_rate_hz")
+    notes = []
+    if rate is None or rate <= 0:
+        rate = 2.0 * float(f[-1])
+        notes.append(f"run '{name}': no sample rate in the file; taken as twice the highest frequency ({rate:g} Hz)")
+    frf = FrfSet(run=name, frequency_hz=f, channels=channels, H=H, coherence=coh, estimator=estimator,
+                 n_averages=n_avg, group_sums=sums, exp_window_tau_s=_optional_float(a, "exp_window_tau_s"),
+                 force_window_s=_optional_float(a, "force_window_s"),
+                 force_taper_s=_optional_float(a, "force_taper_s"), trigger_s=_optional_float(a, "trigger_s"),
+                 sample_rate_hz=rate, fft_precision=_text(a.get("fft_precision")) or "double")
+    geometry = {}
+    for key, shape in (("excitation_direction", (3,)), ("positions_m", (len(channels), 3)),
+                       ("directions", (len(channels), 3)), ("excitation_position_m", (3,))):
+        if key in a:
+            value = np.asarray(a[key], dtype=float)
+            if value.shape != shape:
+                raise RecordingError(f"{where}: attribute '{key}' has shape {value.shape}; expected {shape}")
+            geometry[key] = value
+    hit = geometry.get("excitation_position_m")
+    if hit is not None and not np.all(np.isfinite(hit)):
+        hit = None
+    excitation = geometry.get("excitation_direction")
+    if excitation is None:
+        excitation = infer_excitation_direction(frf)
+        notes.append(f"run '{name}': the file does not say the hammer direction; taken as "
+                     f"{'+x' if excitation[0] else '+y'} from the responses")
+    if "positions_m" not in geometry or "directions" not in geometry:
+        notes.append(f"run '{name}': no sensor geometry in the file; the guide's default points and +axis "
+                     "directions from the channel names")
+    run = frf_run(display, name, rate, excitation, channels, geometry.get("positions_m"),
+                  geometry.get("directions"), hit, guide)
+    return frf, run, notes
+
+
+# ------------------------------------------------------------------ input dispatch
+
+
+def _csv_is_frf(p: Path) -> bool:
+    with open(p, encoding="utf-8", errors="replace") as fh:
+        for line in fh:
+            if line.strip() and not line.lstrip().startswith("#"):
+                head = [c.strip().strip('"').lower() for c in line.split(",")[:2]]
+                return head[0] == "frequency_hz" or head[:2] == ["run", "frequency_hz"]
+    return False
+
+
+def _h5_is_frf(p: Path) -> bool:
+    import h5py
+
+    try:
+        with h5py.File(p, "r") as f:
+            link = f.get("frf", getlink=True)
+            return isinstance(link, h5py.HardLink) and "runs" not in f
+    except (OSError, RuntimeError, ValueError):
+        return False
+
+
+def holds_frfs(path) -> bool:
+    """Whether ``path`` is an FRF file (frf.h5, frf.csv, UFF-58 with FRFs and no time data).
+
+    Decided from the content, not the suffix alone (``.h5``, ``.csv`` and
+    ``.uff`` may hold either); a file that cannot be opened is not an FRF file
+    (its recording reader then says why).
+
+    Examples
+    --------
+    >>> holds_frfs("no_such_file.h5")
+    False
+    """
+    display = os.fspath(path)
+    p = Path(display)
+    if not p.is_file() or p.stat().st_size == 0:
+        return False
+    suffix = p.suffix.lower()
+    if suffix == ".csv":
+        return _csv_is_frf(p)
+    if suffix in (".h5", ".hdf5"):
+        return _h5_is_frf(p)
+    if suffix in (".uff", ".unv"):
+        from guidefit.io.uff import uff_function_types
+
+        try:
+            types = uff_function_types(display)
+        except RecordingError:
+            return False
+        return 4 in types and 1 not in types
+    return False
+
+
+def read_frf_file(path) -> FrfFile:
+    """Read an FRF file (frf.h5 or UFF-58 FRFs) as an :class:`FrfFile`; the suffix chooses the reader.
+
+    Raises
+    ------
+    RecordingError
+        guidefit's frf.csv (it lacks what identification needs), or anything
+        malformed: one line naming the file.
+    """
+    from guidefit.io.registry import _checked_input, format_for
+
+    display = os.fspath(path)
+    p = _checked_input(display, "FRF")
+    if p.suffix.lower() == ".csv":
+        raise RecordingError(
+            f"{display}: guidefit's frf.csv has no excitation direction, sensor geometry, number of averages "
+            "or exponential-window time constant; identify from the recording, or write the FRFs with "
+            "'guidefit frf REC --out frf.h5' (or frf.uff)")
+    fmt = format_for(display, "frf", "read")
+    return fmt.read(p, display)
+
+
+def read_input(path):
+    """What identify starts from: a :class:`~guidefit.io.records.Recording` or an :class:`FrfFile`.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from guidefit.io import RunData, write_recording
+    >>> run = RunData("v", 1000.0, [0, -1, 0], ["force", "acc_A_y"], ["N", "g"],
+    ...               [[0, 0, 0], [0.03, 0, 0.045]], [[0, -1, 0], [0, 1, 0]], data=np.zeros((4, 2)))
+    >>> path = Path(tempfile.mkdtemp()) / "rec.h5"
+    >>> write_recording(path, run)
+    >>> type(read_input(path)).__name__
+    'Recording'
+    """
+    from guidefit.io.registry import read_recording
+
+    if holds_frfs(path):
+        return read_frf_file(path)
+    return read_recording(path)
+
+
+def read_metadata(path):
+    """The run and channel metadata of a recording or an FRF file (a ``Recording``; samples not read)."""
+    source = read_input(path)
+    return source.recording if isinstance(source, FrfFile) else source
 
 
 FORMATS = (
@@ -33,6 +607,7 @@ FORMATS = (
         name="guidefit FRFs, HDF5",
         suffixes=(".h5", ".hdf5"),
         kind="frf",
+        read=read_frf_h5_file,
         write=write_frf_h5_file,
     ),
 )

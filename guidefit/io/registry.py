@@ -46,7 +46,8 @@ class FileFormat:
         or FRFs (``FrfSet`` objects).
     read : callable or None
         ``read(path: pathlib.Path, display: str)``: a ``Recording`` (kind
-        ``recording``) or a tuple of ``FrfSet`` (kind ``frf``). ``display``
+        ``recording``) or a :class:`~guidefit.io.frf_files.FrfFile` (kind ``frf``:
+        the ``FrfSet`` of each run with its run and channel metadata). ``display``
         is the path as the user gave it, for messages. The registry has
         already checked that the file exists, is a file and is not empty.
         Every malformed input raises one-line ``RecordingError``.

@@ -44,12 +44,16 @@ ordinate denominator 13 force, ``N``             0 (unused)                   0 
 ===================  ==========================  ===========================  ======================
 
 ID lines: 1 the function (``H1 acc_A_y/force``, ``coherence acc_A_y/force``,
-``acc_A_y``, ``force``), 2 the run name, 3 and 4 ``NONE``, 5 provenance
-``guidefit key=value ...`` (estimator and averages of an FRF; the exact
-``sample_rate_hz`` of time data, which the E13.5 increment cannot carry, and
-the ``guide``). Entity names are ``NONE``. The format has no NaN: an
+``acc_A_y``, ``force``), 2 the run name, 3 ``NONE``, 4 ``NONE`` for time
+data and for FRFs ``guidefit exp_window_tau_s=<s or none> guide=<name>``
+(the exponential window, whose damping identification takes out again), 5
+provenance ``guidefit key=value ...`` (estimator, averages and sample rate
+of an FRF; the exact ``sample_rate_hz`` of time data, which the E13.5
+increment cannot carry, and the ``guide``). Entity names are ``NONE``. The format has no NaN: an
 undefined value (e.g. the coherence where no force was measured) is written
 as 0.
+
+Reading FRFs: :mod:`guidefit.io.uff_frf` (function types 4 and 6).
 
 Reading time data
 -----------------
@@ -128,6 +132,7 @@ __all__ = [
     "direction_vector",
     "point_nodes",
     "read_uff_recording",
+    "uff_function_types",
     "write_frf_uff",
     "write_uff_recording",
 ]
@@ -368,7 +373,8 @@ def _even_spacing(x: np.ndarray, where: str) -> int:
     return int(bool(step[0] > 0 and np.allclose(step, step[0], rtol=1e-9, atol=0.0)))
 
 
-def _set58(pyuff, *, func_type, ids, rsp, ref, x, data, spacing, abscissa, ordinate, denominator):
+def _set58(pyuff, *, func_type, ids, rsp, ref, x, data, spacing, abscissa, ordinate, denominator,
+           id4="NONE"):
     """One dataset 58 dict; ``abscissa``/``ordinate``/``denominator`` are (spec type, label, units)."""
     values = np.asarray(data)
     values = np.where(np.isfinite(values), values, 0)  # UFF has no NaN
@@ -377,7 +383,7 @@ def _set58(pyuff, *, func_type, ids, rsp, ref, x, data, spacing, abscissa, ordin
         id1=_id_line(ids[0]),
         id2=_id_line(ids[1]),
         id3="NONE",
-        id4="NONE",
+        id4=_id_line(id4),
         id5=_id_line(ids[2]),
         func_type=func_type,
         rsp_ent_name="NONE",
@@ -476,6 +482,7 @@ def write_frf_uff(path, frfsets, *, recording=None) -> None:
     if not items:
         raise RecordingError(f"{display}: no FRF sets to write")
     runs = _runs_by_name(recording)
+    recording_guide = _guide_of(recording)
     names = []
     for frf in items:
         for channel in frf.channels:
@@ -519,6 +526,11 @@ def write_frf_uff(path, frfsets, *, recording=None) -> None:
             n_averages=frf.n_averages,
             sample_rate_hz=getattr(frf, "sample_rate_hz", None),
         )
+        tau = getattr(frf, "exp_window_tau_s", None)
+        windows = _provenance(
+            exp_window_tau_s="none" if tau is None else f"{tau:.12g}",
+            guide=None if recording_guide is None else recording_guide,
+        )
         for k, channel in enumerate(frf.channels):
             point, axis = _ACC_RE.match(channel).groups()
             code = _AXIS_CODES[axis]
@@ -541,6 +553,7 @@ def write_frf_uff(path, frfsets, *, recording=None) -> None:
                     abscissa=frequency,
                     ordinate=(SPEC_ACCELERATION, "Accelerance", "m/s^2"),
                     denominator=(SPEC_FORCE, "Force", "N"),
+                    id4=windows,
                 )
             )
             sets.append(
@@ -556,9 +569,20 @@ def write_frf_uff(path, frfsets, *, recording=None) -> None:
                     abscissa=frequency,
                     ordinate=(SPEC_GENERAL, "Coherence", "NONE"),
                     denominator=(SPEC_UNKNOWN, "NONE", "NONE"),
+                    id4=windows,
                 )
             )
     _write_sets(display, sets)
+
+
+def _guide_of(recording) -> str | None:
+    if recording is None:
+        return None
+    if isinstance(recording, Recording):
+        return recording.guide
+    from guidefit.io.registry import read_recording
+
+    return read_recording(recording).guide
 
 
 def _runs_by_name(recording) -> dict | None:
@@ -711,6 +735,24 @@ def _describe(kinds: list[int], functions: list[int]) -> str:
     if others:
         parts.append("datasets " + ", ".join(str(k) for k in others))
     return "; ".join(parts) or "nothing"
+
+
+def uff_function_types(display: str) -> list[int]:
+    """Function types of the datasets 58 of a UFF file (headers only), in file order.
+
+    Raises
+    ------
+    RecordingError
+        pyuff missing, or not a readable UFF file.
+    """
+    pyuff = _pyuff(display)
+    try:
+        uff = pyuff.UFF(display)
+        kinds = [int(k) for k in uff.get_set_types()]
+    except Exception as exc:  # noqa: BLE001 - pyuff raises bare Exception
+        raise RecordingError(f"{display}: not a readable UFF file ({_first_line(exc)})") from None
+    return [int(_read_set(uff, i, 58, display, header_only=True).get("func_type", -1))
+            for i, kind in enumerate(kinds, start=1) if kind == 58]
 
 
 def _sets_of(display: str) -> list[tuple[int, dict]]:
@@ -1042,11 +1084,5 @@ FORMATS = (
         write=write_uff_recording,
         extra="uff",
     ),
-    FileFormat(
-        name="UFF-58 FRFs",
-        suffixes=UFF_SUFFIXES,
-        kind="frf",
-        write=write_frf_uff,
-        extra="uff",
-    ),
 )
+# the "UFF-58 FRFs" format (reader and this module's writer) is declared in guidefit.io.uff_frf
