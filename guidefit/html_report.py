@@ -182,10 +182,10 @@ def _header(res: ReportResults) -> list[str]:
     import os
 
     from guidefit import __version__
-    from guidefit.recording import read_recording
+    from guidefit.io.frf_files import read_metadata
 
     ident = res.identification
-    rec = read_recording(res.path)
+    rec = read_metadata(res.path)  # a recording's or an FRF file's runs and channels
     now = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
     meta = [["file", res.path], ["SHA-256", file_sha256(res.path)], ["size", f"{os.path.getsize(res.path)} bytes"],
             ["description", rec.description or "-"], ["guide", f"{ident.guide.name} (M = {ident.guide.mass_kg:g} kg)"],
@@ -404,19 +404,27 @@ def _joint(res: ReportResults) -> list[str]:
 
 
 def _hits(res: ReportResults) -> list[str]:
-    from guidefit.report import fmt
-
     ident = res.identification
     hits = ident.hit_rows()  # runs that gave no FRF included
+    if not getattr(ident, "hits_checked", True):
+        parts = ["<h2>Hits</h2><p>No hit checks were possible: the input holds FRFs, not time data.</p>"]
+    else:
+        parts = _hit_table(hits)
+    if ident.warnings:
+        parts.append("<h2>Warnings</h2><ul>" + "".join(
+            f"<li class='warn'>{_e(w)}</li>" for w in ident.warnings) + "</ul>")
+    return parts
+
+
+def _hit_table(hits) -> list[str]:
+    from guidefit.report import fmt
+
     parts = [f"<h2>Hits</h2><p>{sum(h['accepted'] for h in hits)} accepted, "
              f"{sum(not h['accepted'] for h in hits)} rejected</p>",
              _table(["run", "hit", "start sample", "peak force (N)", "accepted", "reason"],
                     [[h["run"], h["hit"], h.get("start_sample", "-"), fmt(h["peak_force_n"]),
                       "yes" if h["accepted"] else "no", h["reason"] or ""] for h in hits],
                     ["" if h["accepted"] else "bad" for h in hits])]
-    if ident.warnings:
-        parts.append("<h2>Warnings</h2><ul>" + "".join(
-            f"<li class='warn'>{_e(w)}</li>" for w in ident.warnings) + "</ul>")
     return parts
 
 

@@ -233,7 +233,10 @@ def render_identification(result, console=None) -> None:
     all_hits = result.hit_rows()
     rejected = [h for h in all_hits if not h["accepted"]]
     n_hits = len(all_hits)
-    console.print(f"hits: {n_hits - len(rejected)} accepted, {len(rejected)} rejected")
+    if getattr(result, "hits_checked", True):
+        console.print(f"hits: {n_hits - len(rejected)} accepted, {len(rejected)} rejected")
+    else:
+        console.print("hits: not checked (FRF input: no time data)")
     if rejected:
         hits = Table(title="rejected hits")
         for col in ("run", "hit", "peak force (N)", "reason"):
@@ -443,14 +446,14 @@ def frf_overlay(identification, explanation) -> dict:
 
     from guidefit.explain import fitted_spec
     from guidefit.model import vibration as vib
-    from guidefit.recording import read_recording
+    from guidefit.io.frf_files import read_metadata
 
     ident = identification
     run = ident.runs[0]
     frf = run.frf
     k = int(np.argmax(np.max(np.abs(frf.H), axis=0)))
     ch = run.channels[k]
-    rec_run = read_recording(ident.file).run(run.name)  # metadata only: the hit point
+    rec_run = read_metadata(ident.file).run(run.name)  # metadata only (recording or FRF file): the hit point
     hit = rec_run.excitation_position_m if rec_run.excitation_position_m is not None else np.zeros(3)
     zeta = {}
     for m in ident.modes:
