@@ -363,9 +363,9 @@ def frf_cmd(recording, estimator, window_text, out_path, fft_precision):
         click.echo(f"guidefit: warning: {w}", err=True)
     if out_path:
         from guidefit.frf_io import write_frfs
-        from guidefit.recording import read_recording
+        from guidefit.io.frf_files import read_metadata
 
-        write_frfs(out_path, frfsets, recording=read_recording(recording))
+        write_frfs(out_path, frfsets, recording=read_metadata(recording))  # a recording's or FRF file's runs
         click.echo(f"FRFs of {len(frfsets)} run(s) written to {out_path}")
     else:
         report.render_frf_summary(frfsets)
