@@ -1084,5 +1084,12 @@ FORMATS = (
         write=write_uff_recording,
         extra="uff",
     ),
+    FileFormat(
+        name="UFF-58 FRFs",
+        suffixes=UFF_SUFFIXES,
+        kind="frf",
+        write=write_frf_uff,
+        extra="uff",
+    ),
 )
-# the "UFF-58 FRFs" format (reader and this module's writer) is declared in guidefit.io.uff_frf
+# the reader of UFF-58 FRFs is declared in guidefit.io.uff_frf

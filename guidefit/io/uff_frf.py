@@ -393,8 +393,7 @@ FORMATS = (
         name="UFF-58 FRFs",
         suffixes=UFF_SUFFIXES,
         kind="frf",
-        read=read_uff_frfs,
-        write=write_frf_uff,
+        read=read_uff_frfs,  # the writer, write_frf_uff, is declared in guidefit.io.uff
         extra="uff",
     ),
 )
