@@ -281,9 +281,9 @@ def _failed_json(path, guide_name, code, error) -> dict:
     guide = guide_name
     if guide is None:
         try:  # the file's own guide when its metadata can be read (e.g. every hit rejected)
-            from guidefit.recording import read_recording
+            from guidefit.io.frf_files import read_metadata
 
-            guide = read_recording(path).guide or "MRB35"
+            guide = read_metadata(path).guide or "MRB35"  # a recording's or an FRF file's
         except Exception:  # noqa: BLE001 - unreadable file: the guide is unknown
             guide = None
     return {"file": str(path), "guide": guide, "parameters": joint_parameters(1.0, {}), "modes": [],

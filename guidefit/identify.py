@@ -831,6 +831,8 @@ def file_frfs(frf_file, settings: IdentifySettings, warnings: list):
     estimator than the file's is used where its jackknife sums allow.
     """
     warnings.extend(frf_file.notes)
+    if settings.window is not None:
+        warnings.append("the window settings do not apply: the file holds FRFs already computed")
     for run, frf in zip(frf_file.recording.runs, frf_file.frfsets):
         if settings.estimator != frf.estimator:
             if frf.n_groups >= 1:
@@ -862,9 +864,9 @@ def identify(path, guide=None, settings: IdentifySettings | None = None) -> Iden
     IdentificationError
         Valid file, but no result can be trusted: every hit rejected, no joint mode found (exit 1).
     """
+    from guidefit.io.frf_files import FrfFile, read_input
     from guidefit.model import vibration as vib
     from guidefit.model.guides import Guide, load_guide
-    from guidefit.io.frf_files import FrfFile, read_input
 
     settings = settings or IdentifySettings()
     source = read_input(path)

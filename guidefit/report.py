@@ -445,8 +445,8 @@ def frf_overlay(identification, explanation) -> dict:
     import numpy as np
 
     from guidefit.explain import fitted_spec
-    from guidefit.model import vibration as vib
     from guidefit.io.frf_files import read_metadata
+    from guidefit.model import vibration as vib
 
     ident = identification
     run = ident.runs[0]

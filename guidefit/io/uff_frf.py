@@ -39,13 +39,19 @@ hit checks were possible and that the std is the modal fit's own.
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
 
 from guidefit.errors import RecordingError
-from guidefit.io.frf_files import NOTE_NO_HITS, FrfFile, check_frf_arrays, frf_run, infer_excitation_direction
+from guidefit.io.frf_files import (
+    NOTE_FIT_STD,
+    NOTE_NO_HITS,
+    FrfFile,
+    check_frf_arrays,
+    frf_run,
+    infer_excitation_direction,
+)
 from guidefit.io.registry import FileFormat
 from guidefit.io.uff import (
     _ACC_LABELS,
@@ -71,7 +77,6 @@ from guidefit.io.uff import (
     _pyuff,
     _read_set,
     direction_vector,
-    write_frf_uff,
 )
 
 __all__ = ["read_uff_frfs"]
@@ -286,8 +291,9 @@ def read_uff_frfs(p: Path, display: str) -> FrfFile:
 
     Examples
     --------
-    >>> import tempfile
+    >>> import os, tempfile
     >>> from guidefit.frf import frf_from_records
+    >>> from guidefit.io.uff import write_frf_uff
     >>> t = np.arange(256) / 2000.0
     >>> force = np.where(t < 2e-3, np.sin(np.pi * t / 2e-3), 0.0)
     >>> acc = np.convolve(force, np.exp(-40 * t) * np.sin(2 * np.pi * 300 * t))[:256]
@@ -382,8 +388,7 @@ def read_uff_frfs(p: Path, display: str) -> FrfFile:
         hit = nodes.get(g["ref"][0])
         runs.append(frf_run(display, name, rate, excitation, channels, positions, directions, hit, guide))
         frfsets.append(frf)
-    notes.append("the std is the modal fit's own standard error: hit-to-hit scatter is not included "
-                 "(UFF-58 carries no hits or jackknife sums)")
+    notes.append(f"{NOTE_FIT_STD} (UFF-58 carries no hits or jackknife sums; guidefit's frf.h5 keeps them)")
     recording = Recording(path=display, guide=guide, description="FRFs (UFF-58)", runs=tuple(runs))
     return FrfFile(display, "UFF-58 FRFs", recording, tuple(frfsets), tuple(notes))
 
