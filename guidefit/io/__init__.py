@@ -23,7 +23,9 @@ Modules
                           writer, :func:`open_signals_writer`)
 ``csv``                   the recording contract in CSV
 ``uff``                   UFF-58 time data and FRFs (pyuff, extra ``uff``)
-``frf_files``             guidefit's ``frf.csv`` / ``frf.h5``
+``frf_files``             guidefit's ``frf.csv`` / ``frf.h5``; FRF files as input
+                          (``FrfFile``, ``read_input``)
+``uff_frf``               UFF-58 FRFs in (function types 4 and 6)
 ``watchdog``              the forked, time-limited HDF5 metadata read
 ``geometry``              default sensor positions from a guide's points
 ``_checks``               validation helpers
