@@ -13,7 +13,10 @@ A check spec is a TOML file::
     max_relative_std = 0.02           # std / value of every checked parameter
     allow_warnings = true             # false: any warning is a violation
 
-A parameter that was not identified (``null``) violates any band on it. A band
+A parameter that was not identified (``null``) violates any band on it. A
+result from an FRF file (``hits_checked: false``) violates
+``max_rejected_hits`` (its hits could not be checked), and a joint mode
+without a coherence (an FRF file without one) violates ``min_coherence``. A band
 on a name that is not one of identify's eight parameters, a limit that is not a
 finite number, or a quality limit out of its range (coherence 0-1, counts whole
 and >= 0) makes the spec invalid (exit 2) rather than fail every file.
@@ -127,9 +130,13 @@ def check_result(result: dict, spec: CheckSpec) -> list[str]:
     if "min_coherence" in q:
         for mode in result.get("modes", []):
             coh = mode.get("coherence")
-            if mode.get("label") in _JOINT and coh is not None and coh < q["min_coherence"]:
+            if mode.get("label") in _JOINT and (coh is None or coh != coh):  # an FRF file without coherence
+                out.append(f"{where}: no coherence at the {mode['label']} peak to check against {q['min_coherence']}")
+            elif mode.get("label") in _JOINT and coh < q["min_coherence"]:
                 out.append(f"{where}: coherence {coh:.3f} at the {mode['label']} peak below {q['min_coherence']}")
-    if "max_rejected_hits" in q:
+    if "max_rejected_hits" in q and result.get("hits_checked") is False:
+        out.append(f"{where}: max_rejected_hits not checkable: no hit checks were possible (FRF input)")
+    elif "max_rejected_hits" in q:
         rejected = sum(1 for h in result.get("hits", []) if not h.get("accepted", True))
         if rejected > q["max_rejected_hits"]:
             out.append(f"{where}: {rejected} rejected hits, more than {q['max_rejected_hits']}")

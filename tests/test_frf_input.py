@@ -111,6 +111,18 @@ def test_identify_json_says_no_hits_were_checked(case):
     assert table.exit_code == 0 and "hits: not checked (FRF input" in table.output
 
 
+def test_checks_that_need_hits_or_coherence_are_not_passed_vacuously(case, tmp_path):
+    from guidefit.check import check_result, parse_spec
+
+    spec = parse_spec({"quality": {"max_rejected_hits": 0, "min_coherence": 0.5}}, "spec")
+    assert check_result(case["ident"].to_dict(), spec) == []
+    frf_h5 = check_result(identify(case["frf_h5"]).to_dict(), spec)
+    assert len(frf_h5) == 1 and "no hit checks were possible" in frf_h5[0]
+    no_coherence = _other_tool_uff(tmp_path / "nocoh.uff", case["plain_frfsets"])
+    violations = check_result(identify(no_coherence).to_dict(), spec)
+    assert sum("no coherence at the" in v for v in violations) == 2  # vertical and roll_low
+
+
 def test_time_data_json_says_hits_were_checked(case):
     assert case["ident"].to_dict()["hits_checked"] is True
 
