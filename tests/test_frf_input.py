@@ -309,3 +309,25 @@ def test_reading_samples_of_an_frf_run_is_an_error(case):
     frf_file = read_frf_file(case["frf_h5"])
     with pytest.raises(RecordingError, match="holds FRFs, not time data"):
         frf_file.recording.runs[0].source.read((slice(0, 1),))
+
+
+def test_frf_h5_links_and_group_sums_are_checked(case, tmp_path):
+    import os
+
+    import h5py
+
+    fifo = tmp_path / "fifo"
+    os.mkfifo(fifo)
+    path = tmp_path / "ext.h5"
+    path.write_bytes(case["frf_h5"].read_bytes())
+    with h5py.File(path, "r+") as f:
+        del f["frf/vertical/H"]
+        f["frf/vertical/H"] = h5py.ExternalLink(str(fifo), "/H")  # would block a reader that follows it
+    _one_line_exit_2(path, "run 'vertical'", "not a regular file")
+    path = tmp_path / "sums.h5"
+    path.write_bytes(case["frf_h5"].read_bytes())
+    with h5py.File(path, "r+") as f:
+        sff = f["frf/lateral/group_sums/Sff"][()]
+        del f["frf/lateral/group_sums/Sff"]
+        f["frf/lateral/group_sums/Sff"] = sff[:, :10]  # a jackknife on other bins than H: refused
+    _one_line_exit_2(path, "run 'lateral'", "group_sums/Sff")

@@ -440,8 +440,10 @@ def _read_h5_run(display: str, root, name: str, guide):
 
     from guidefit.frf import FrfSet
 
+    from guidefit.io.hdf5 import _get_checked
+
     where = f"{display}: run '{name}'"
-    g = root[name]
+    g = _get_checked(root, name, where)  # links checked before they are followed
     if not isinstance(g, h5py.Group):
         raise RecordingError(f"{where}: /frf/{name} is not a group")
     a = g.attrs
@@ -455,7 +457,10 @@ def _read_h5_run(display: str, root, name: str, guide):
                                  _dataset(g, "coherence", where), channels)
     sums = {}
     if "group_sums" in g:
-        sums = {k: _dataset(g["group_sums"], k, f"{where}: group_sums") for k in ("Sff", "Sxx", "Sfx", "n_hits")}
+        holder = _get_checked(g, "group_sums", f"{where}: group_sums")
+        if not isinstance(holder, h5py.Group):
+            raise RecordingError(f"{where}: group_sums is not a group")
+        sums = {k: _dataset(holder, k, f"{where}: group_sums") for k in ("Sff", "Sxx", "Sfx", "n_hits")}
         G = np.asarray(sums["n_hits"]).shape[0]
         want = {"Sff": (G, f.size), "Sxx": (G, f.size, len(channels)), "Sfx": (G, f.size, len(channels))}
         for k, shape in want.items():
