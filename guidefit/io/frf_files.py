@@ -439,7 +439,6 @@ def _read_h5_run(display: str, root, name: str, guide):
     import h5py
 
     from guidefit.frf import FrfSet
-
     from guidefit.io.hdf5 import _get_checked
 
     where = f"{display}: run '{name}'"
