@@ -305,65 +305,21 @@ def read_uff_frfs(p: Path, display: str) -> FrfFile:
     >>> got.recording.runs[0].name, got.frfsets[0].channels, bool(np.allclose(got.frfsets[0].H, frf.H))
     ('vertical', ('acc_A_y',), True)
     """
-    from guidefit.frf import FrfSet
     from guidefit.io.records import Recording
 
     frfs, cohs, nodes = _scan(display)
-    groups = _group(frfs, display)
     guide = next((r["windows"].get("guide") for r in frfs if r["windows"].get("guide")), None)
     points = _default_points(guide)
     notes: list[str] = [NOTE_NO_HITS]
     frfsets, runs, used = [], [], set()
-    for g in groups:
+    for g in _group(frfs, display):
         members = g["members"]
-        first = members[0]
-        prov = first["provenance"]
         ids = {r["id2"] for r in members}
         name = ids.pop() if (all(r["provenance"] for r in members) and len(ids) == 1) else None
         if not name or name in used or "/" in name:
             name = f"ref{g['ref'][0]}{_direction_label(g['ref'][1])}"
         used.add(name)
-        where = f"{display}: run '{name}' (set {first['set']}...)"
-        channels = [_channel_name(r) for r in members]
-        if len(set(channels)) != len(channels):
-            channels = [_derived_channel(r) for r in members]
-        coh = _coherence_of(g, cohs, display)
-        if coh is None:
-            notes.append(f"run '{name}': no coherence in the file (NaN); the coherence check is not possible")
-        f = _exact_axis(members[0]["f"], prov.get("sample_rate_hz"))
-        f, H, coh_checked = check_frf_arrays(where, f, np.column_stack([r["H"] for r in members]),
-                                             np.ones((f.size, len(members))) if coh is None else coh, channels)
-        if coh is None:
-            coh_checked = np.full(H.shape, np.nan)
-            coh_checked.flags.writeable = False
-        converted = sorted({r["name"] for r in members if r["spec"] != SPEC_ACCELERATION})
-        if converted:
-            notes.append(f"run '{name}': {', '.join(converted)} FRFs converted to accelerance")
-        tau_text = first["windows"].get("exp_window_tau_s")
-        tau = None
-        if tau_text not in (None, "none"):
-            try:
-                tau = float(tau_text)
-            except ValueError:
-                raise RecordingError(f"{where}: ID line 4 exp_window_tau_s={tau_text!r}; expected seconds") from None
-        if not first["windows"]:
-            notes.append(f"run '{name}': the file does not say whether an exponential window was applied; the "
-                         "damping includes any window damping of the program that computed the FRFs")
-        rate = prov.get("sample_rate_hz")
-        try:
-            rate = float(rate) if rate is not None else None
-        except ValueError:
-            rate = None
-        if rate is None or not rate > 0:
-            rate = 2.0 * float(f[-1])
-            notes.append(f"run '{name}': no sample rate in the file; taken as twice the highest frequency ({rate:g} Hz)")
-        try:
-            n_avg = int(prov.get("n_averages", 0))
-        except ValueError:
-            n_avg = 0
-        frf = FrfSet(run=name, frequency_hz=f, channels=tuple(channels), H=H, coherence=coh_checked,
-                     estimator=prov.get("estimator", "unknown"), n_averages=n_avg, group_sums={},
-                     exp_window_tau_s=tau, force_window_s=None, sample_rate_hz=rate)
+        frf = _run_frfset(g, cohs, name, display, notes)
         code = g["ref"][1]
         if code == 0:
             excitation = infer_excitation_direction(frf)
@@ -371,26 +327,80 @@ def read_uff_frfs(p: Path, display: str) -> FrfFile:
                          f"{'+x' if excitation[0] else '+y'} from the responses")
         else:
             excitation = direction_vector(code)
-        positions, missing = [], []
-        for channel, r in zip(channels, members):
-            point = channel.split("_")[1] if channel.count("_") >= 2 else ""
-            if r["rsp"][0] in nodes:
-                positions.append(nodes[r["rsp"][0]])
-            elif point in points:
-                positions.append(np.asarray(points[point], float))
-            else:
-                positions.append(np.zeros(3))
-                missing.append(channel)
-        if missing:
-            notes.append(f"run '{name}': no position for {', '.join(missing)} (no node coordinates in the file): "
-                         "taken at the origin; mode labels from shapes at the sensors may be wrong")
+        positions = _positions(members, frf.channels, nodes, points, name, notes)
         directions = [direction_vector(r["rsp"][1]) for r in members]
-        hit = nodes.get(g["ref"][0])
-        runs.append(frf_run(display, name, rate, excitation, channels, positions, directions, hit, guide))
+        runs.append(frf_run(display, name, frf.sample_rate_hz, excitation, frf.channels, positions, directions,
+                            nodes.get(g["ref"][0]), guide))
         frfsets.append(frf)
     notes.append(f"{NOTE_FIT_STD} (UFF-58 carries no hits or jackknife sums; guidefit's frf.h5 keeps them)")
     recording = Recording(path=display, guide=guide, description="FRFs (UFF-58)", runs=tuple(runs))
     return FrfFile(display, "UFF-58 FRFs", recording, tuple(frfsets), tuple(notes))
+
+
+def _number(text, kind, default):
+    try:
+        return kind(text) if text is not None else default
+    except ValueError:
+        return default
+
+
+def _run_frfset(g: dict, cohs: list, name: str, display: str, notes: list):
+    """The FrfSet of one reference DOF's FRF records (and coherences); what is missing goes to ``notes``."""
+    from guidefit.frf import FrfSet
+
+    members = g["members"]
+    first = members[0]
+    prov = first["provenance"]
+    where = f"{display}: run '{name}' (set {first['set']}...)"
+    channels = [_channel_name(r) for r in members]
+    if len(set(channels)) != len(channels):
+        channels = [_derived_channel(r) for r in members]
+    coh = _coherence_of(g, cohs, display)
+    if coh is None:
+        notes.append(f"run '{name}': no coherence in the file (NaN); the coherence check is not possible")
+    f = _exact_axis(first["f"], prov.get("sample_rate_hz"))
+    f, H, coh_checked = check_frf_arrays(where, f, np.column_stack([r["H"] for r in members]),
+                                         np.ones((f.size, len(members))) if coh is None else coh, channels)
+    if coh is None:
+        coh_checked = np.full(H.shape, np.nan)
+        coh_checked.flags.writeable = False
+    converted = sorted({r["name"] for r in members if r["spec"] != SPEC_ACCELERATION})
+    if converted:
+        notes.append(f"run '{name}': {', '.join(converted)} FRFs converted to accelerance")
+    tau_text = first["windows"].get("exp_window_tau_s")
+    tau = None
+    if tau_text not in (None, "none"):
+        tau = _number(tau_text, float, None)
+        if tau is None or not tau > 0:
+            raise RecordingError(f"{where}: ID line 4 exp_window_tau_s={tau_text!r}; expected seconds > 0")
+    if not first["windows"]:
+        notes.append(f"run '{name}': the file does not say whether an exponential window was applied; the "
+                     "damping includes any window damping of the program that computed the FRFs")
+    rate = _number(prov.get("sample_rate_hz"), float, None)
+    if rate is None or not rate > 0:
+        rate = 2.0 * float(f[-1])
+        notes.append(f"run '{name}': no sample rate in the file; taken as twice the highest frequency ({rate:g} Hz)")
+    return FrfSet(run=name, frequency_hz=f, channels=tuple(channels), H=H, coherence=coh_checked,
+                  estimator=prov.get("estimator", "unknown"), n_averages=_number(prov.get("n_averages"), int, 0),
+                  group_sums={}, exp_window_tau_s=tau, force_window_s=None, sample_rate_hz=rate)
+
+
+def _positions(members: list, channels, nodes: dict, points: dict, name: str, notes: list) -> list:
+    """Each channel's position: the node's coordinates in the file, else the guide's point, else the origin."""
+    positions, missing = [], []
+    for channel, r in zip(channels, members):
+        point = channel.split("_")[1] if channel.count("_") >= 2 else ""
+        if r["rsp"][0] in nodes:
+            positions.append(nodes[r["rsp"][0]])
+        elif point in points:
+            positions.append(np.asarray(points[point], float))
+        else:
+            positions.append(np.zeros(3))
+            missing.append(channel)
+    if missing:
+        notes.append(f"run '{name}': no position for {', '.join(missing)} (no node coordinates in the file): "
+                     "taken at the origin; mode labels from shapes at the sensors may be wrong")
+    return positions
 
 
 FORMATS = (
