@@ -168,10 +168,17 @@ def test_input_kind_is_decided_from_the_content(case, tmp_path):
 
 
 def _other_tool_uff(path, frfsets, *, numerator=12, units="m/s^2", from_bin=0, coherence=False,
-                    denominator=13, den_units="N", axes=None):
-    """FRFs as another program writes them with pyuff: its own nodes (1-4 = A-D), reference node 20."""
+                    denominator=13, den_units="N", axes=None, node_base=1, geometry=None):
+    """FRFs as another program writes them with pyuff: its own nodes (A-D = node_base + 0..3), reference node 20.
+
+    ``geometry``: a point -> position mapping written as a dataset 2411 (node coordinates).
+    """
     sets = [pyuff.prepare_164(units_code=1, units_description="SI", temp_mode=2, length=1.0, force=1.0,
                               temp=1.0, temp_offset=273.15)]
+    if geometry is not None:
+        xyz = np.array([geometry[p] for p in "ABCD"], float)
+        sets.append(pyuff.prepare_2411(node_nums=np.arange(4) + node_base, def_cs=np.zeros(4, int), disp_cs=np.zeros(4, int),
+                                       color=np.ones(4, int), x=xyz[:, 0], y=xyz[:, 1], z=xyz[:, 2]))
     power = {12: 0, 11: 1, 8: 2}.get(numerator, 0)
     for i, frf in enumerate(frfsets):
         ref_dir = -2 if frf.run == "vertical" else -1
@@ -181,7 +188,7 @@ def _other_tool_uff(path, frfsets, *, numerator=12, units="m/s^2", from_bin=0, c
         for k, channel in enumerate(frf.channels):
             _, point, axis = channel.split("_")
             H = np.asarray(frf.H)[from_bin:, k] / (2j * np.pi * f) ** power
-            common = dict(binary=0, rsp_node="ABCD".index(point) + 1, rsp_dir="xyz".index(axis) + 1,
+            common = dict(binary=0, rsp_node="ABCD".index(point) + node_base, rsp_dir="xyz".index(axis) + 1,
                           ref_node=20 + i, ref_dir=ref_dir, x=f, abscissa_spacing=1, abscissa_spec_data_type=18,
                           abscissa_axis_units_lab="Hz", rsp_ent_name="carriage", ref_ent_name="hammer",
                           id1=f"FRF {point}{axis}", id2="impact test", id3="NONE", id4="NONE", id5="NONE")
@@ -207,6 +214,22 @@ def test_uff_frfs_of_another_program_give_the_same_joint(case, tmp_path):
     assert {ch.name for ch in run.channels} == set(case["plain_frfsets"][0].channels)
     text = " ".join(got.warnings)
     assert "exponential window" in text and "no coherence" in text and "twice the highest frequency" in text
+
+
+def test_node_coordinates_of_the_file_place_other_nodes(case, tmp_path):
+    from guidefit.io import default_points
+
+    points = {p: np.asarray(v, float) for p, v in default_points("MRB35").items()}
+    path = _other_tool_uff(tmp_path / "nodes.uff", case["plain_frfsets"], node_base=31, geometry=points)
+    got = identify(path)
+    _assert_same_joint(got, case["plain_ident"], within=0.01)
+    run = next(r for r in got.runs if r.name == "ref20-Y")
+    by_name = {ch.name: ch for ch in run.channels}
+    assert by_name["acc_N33_y"].position_m == pytest.approx(points["C"])  # node 33 is the file's point C
+    assert not any("no position for" in w for w in got.warnings)
+    # without the coordinates nodes 31-34 have no position: said, not hidden
+    bare = _other_tool_uff(tmp_path / "bare.uff", case["plain_frfsets"][:1], node_base=31)
+    assert any("no position for acc_N31_x" in note for note in read_frf_file(bare).notes)
 
 
 @pytest.mark.parametrize("numerator, units", [(8, "m"), (11, "m/s")])
