@@ -218,6 +218,7 @@ class Identification:
             row[f"{name}_{suffix}"] = p["value"]
             row[f"{name}_std_{suffix}"] = p["std"]
         row["n_warnings"] = len(self.warnings)
+        row["hits_checked"] = self.hits_checked  # False: from an FRF file
         return row
 
 

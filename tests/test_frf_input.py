@@ -80,6 +80,7 @@ def test_frf_h5_gives_the_recordings_identification(case):
         assert b["value"] == pytest.approx(a["value"], rel=1e-9), name
         assert b["std"] == pytest.approx(a["std"], rel=1e-6), name
     assert got.hits_checked is False and got.hit_rows() == []
+    assert got.summary_row()["hits_checked"] is False and case["ident"].summary_row()["hits_checked"] is True
     assert any("no hit checks were possible" in w for w in got.warnings)
     assert not any("hit-to-hit scatter is not included" in w for w in got.warnings)
     # geometry and hammer directions came with the file
