@@ -608,9 +608,13 @@ def read_input(path):
     """
     from guidefit.io.registry import read_recording
 
-    if holds_frfs(path):
-        return read_frf_file(path)
-    return read_recording(path)
+    # a recording is read at no extra cost; the content of a file no recording reader takes is looked at then
+    try:
+        return read_recording(path)
+    except RecordingError:
+        if holds_frfs(path):
+            return read_frf_file(path)
+        raise
 
 
 def read_metadata(path):
