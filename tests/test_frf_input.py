@@ -323,6 +323,26 @@ def test_unsupported_ordinates_are_refused(case, tmp_path, numerator, units, nee
     _one_line_exit_2(path, needle)
 
 
+def _edited_sets(path, edit):
+    """Rewrite a UFF file with ``edit(sets)`` applied to its pyuff datasets."""
+    sets = pyuff.UFF(str(path)).read_sets()
+    edit(sets)
+    path.unlink()
+    pyuff.UFF(str(path)).write_sets(sets, mode="add")
+    return path
+
+
+@pytest.mark.parametrize("edit, needle", [
+    (lambda sets: sets[1].update(data=np.abs(sets[1]["data"]), ord_data_type=4), "FRF with real values"),
+    (lambda sets: sets[2].update(rsp_node=sets[1]["rsp_node"], rsp_dir=sets[1]["rsp_dir"]), "two FRFs of response"),
+    (lambda sets: [s.update(ref_dir=5) for s in sets[1:]], "is a rotation"),
+    (lambda sets: sets[0].update(length=0.001), "guidefit reads SI"),
+])
+def test_malformed_uff_frfs_are_refused(case, tmp_path, edit, needle):
+    path = _edited_sets(_other_tool_uff(tmp_path / "x.uff", case["plain_frfsets"][:1]), edit)
+    _one_line_exit_2(path, needle)
+
+
 def test_frf_csv_is_refused_with_the_reason(case, tmp_path):
     path = tmp_path / "frf.csv"
     write_frfs(path, case["frfsets"])
