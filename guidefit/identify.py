@@ -835,7 +835,7 @@ def file_frfs(frf_file, settings: IdentifySettings, warnings: list):
     if settings.window is not None:
         warnings.append("the window settings do not apply: the file holds FRFs already computed")
     for run, frf in zip(frf_file.recording.runs, frf_file.frfsets):
-        if settings.estimator != frf.estimator:
+        if settings.estimator != frf.estimator and frf.estimator in ("H1", "H2", "Hv"):  # else: not said
             if frf.n_groups >= 1:
                 frf = frf.with_estimator(settings.estimator)
             else:

@@ -128,6 +128,15 @@ def test_time_data_json_says_hits_were_checked(case):
     assert case["ident"].to_dict()["hits_checked"] is True
 
 
+def test_another_estimator_from_frf_h5_uses_its_sums_and_uff_says_it_cannot(case):
+    h2 = IdentifySettings(estimator="H2")
+    from_rec, from_h5 = identify(case["rec"], settings=h2), identify(case["frf_h5"], settings=h2)
+    for name in JOINT:
+        assert from_h5.parameters[name]["value"] == pytest.approx(from_rec.parameters[name]["value"], rel=1e-9)
+    from_uff = identify(case["frf_uff"], settings=h2)
+    assert any("holds H1 FRFs; estimator H2 needs the spectral sums" in w for w in from_uff.warnings)
+
+
 def test_frf_command_converts_frf_h5_to_uff(case, tmp_path):
     out = tmp_path / "conv.uff"
     result = cli("frf", case["frf_h5"], "--out", out)
@@ -216,6 +225,7 @@ def test_uff_frfs_of_another_program_give_the_same_joint(case, tmp_path):
     assert {ch.name for ch in run.channels} == set(case["plain_frfsets"][0].channels)
     text = " ".join(got.warnings)
     assert "exponential window" in text and "no coherence" in text and "twice the highest frequency" in text
+    assert "estimator" not in text  # the file does not say which: nothing to compare --estimator with
 
 
 def test_node_coordinates_of_the_file_place_other_nodes(case, tmp_path):
