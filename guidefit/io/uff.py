@@ -765,7 +765,7 @@ def _sets_of(display: str) -> list[tuple[int, dict]]:
         raise RecordingError(f"{display}: not a readable UFF file ({_first_line(exc)})") from None
     if not kinds:
         raise RecordingError(
-            f"{display}: no UFF datasets (blocks between '    -1' lines); expected UFF-58 time data"
+            f"{display}: no UFF datasets (blocks between '    -1' lines); expected UFF-58 time data or FRFs"
         )
     if _count_delimiters(Path(display).read_bytes()) % 2:
         raise RecordingError(
@@ -784,7 +784,8 @@ def _sets_of(display: str) -> list[tuple[int, dict]]:
     if not time_sets:
         raise RecordingError(
             f"{display}: no time data (dataset 58, function type 1); found "
-            f"{_describe(kinds, functions)}. guidefit reads UFF-58 time records as a recording"
+            f"{_describe(kinds, functions)}. guidefit reads UFF-58 time records as a recording "
+            "(identify, explain and report also take FRFs: function type 4)"
         )
     return [(i, _read_set(uff, i, 58, display)) for i in time_sets]
 
