@@ -48,7 +48,7 @@ def sim(tmp_path_factory):
     """The simulated test, its contract file and its identification."""
     from guidefit.identify import identify
 
-    config = replace(SimulationConfig(), hits=4, record_s=0.05, layout="signals", gap_s=0.01)
+    config = replace(SimulationConfig(), hits=3, record_s=0.04, layout="signals", gap_s=0.005)
     data, _ = simulate("MRB35", config=config, seed=11)
     folder = tmp_path_factory.mktemp("daq")
     write_recording(folder / "contract.h5", data)

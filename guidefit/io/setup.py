@@ -474,6 +474,8 @@ def _check_units(ch: SetupChannel, dc: DaqChannel, daq: DaqFile, display: str) -
 
 
 def _select(setup: Setup, run: SetupRun, daq: DaqFile) -> list[tuple[SetupChannel, DaqChannel]]:
+    """The run's channels: those it lists (each must be in the file), else every channel
+    of the setup whose source the file has."""
     names = run.channels or tuple(setup.channels)
     picked = []
     for name in names:
@@ -491,6 +493,18 @@ def _select(setup: Setup, run: SetupRun, daq: DaqFile) -> list[tuple[SetupChanne
         if np.dtype(dc.dtype).kind not in "fiu":
             raise SetupError(f"{daq.display}: channel '{dc.name}' holds {np.dtype(dc.dtype)}, not numbers")
     return picked
+
+
+def _check_all_found(setup: Setup, opened: list) -> None:
+    """A channel no run's file has is a typo, not a sensor moved between runs: one line naming
+    the first file that should have had it."""
+    found = {ch.name for _, _, picked in opened for ch, _ in picked}
+    for name, ch in setup.channels.items():
+        if name in found:
+            continue
+        for run, daq, _ in opened:
+            if run.channels is None:
+                raise daq.missing(ch.source)
 
 
 def _run_length(picked, daq: DaqFile) -> int:
@@ -553,10 +567,13 @@ def _geometry(setup: Setup, run: SetupRun, chans: list[SetupChannel]):
     return [pos[ch.name] for ch in chans], [dirs[ch.name] for ch in chans]
 
 
-def _open_run(setup: Setup, run: SetupRun) -> Run:
+def _open_daq(setup: Setup, run: SetupRun):
     options = RunOptions(f"{setup.path}: runs.{run.name}", run.group, run.delimiter, run.decimal)
     daq = run.format.read(run.path, run.display, options)
-    picked = _select(setup, run, daq)
+    return run, daq, _select(setup, run, daq)
+
+
+def _make_run(setup: Setup, run: SetupRun, daq: DaqFile, picked) -> Run:
     for ch, dc in picked:
         _check_units(ch, dc, daq, setup.path)
     n = _run_length(picked, daq)
@@ -580,6 +597,9 @@ def read_setup(p: Path, display: str) -> Recording:
 
     The setup is checked whole first (:func:`load_setup`), then each run's DAQ
     file is opened (metadata and time axis only; samples stay in the file).
+    A run without a ``channels`` list takes every channel whose source its file
+    has (a sensor moved between runs); a channel that no run's file has is an
+    error (a misspelt source would otherwise drop a sensor silently).
 
     Raises
     ------
@@ -588,7 +608,9 @@ def read_setup(p: Path, display: str) -> Recording:
         (``lateral.tdms: no channel 'A_Y'; the file has Hammer, AccA_Y, AccB_Y``).
     """
     setup = load_setup(display)
-    runs = tuple(_open_run(setup, run) for run in setup.runs)
+    opened = [_open_daq(setup, run) for run in setup.runs]
+    _check_all_found(setup, opened)
+    runs = tuple(_make_run(setup, run, daq, picked) for run, daq, picked in opened)
     return Recording(path=display, guide=setup.guide, description=setup.description, runs=runs)
 
 
@@ -632,14 +654,20 @@ def convert(path, out, *, compression: str | None = None) -> Recording:
     from guidefit.io.registry import format_for, read_recording, write_recording
 
     out_display = os.fspath(out)
+    target = Path(out_display)
+
+    def refuse_inputs(inputs):
+        if target.exists():
+            for item in inputs:
+                if _same_file(item, target):
+                    raise RecordingError(
+                        f"{out_display}: is an input ({os.fspath(item)}); refusing to write onto it"
+                    )
+
+    refuse_inputs([Path(os.fspath(path))])
     format_for(out_display, "recording", "write")  # an unknown output type fails before any reading
     recording = read_recording(path)
-    target = Path(out_display)
-    inputs = [Path(os.fspath(path))] + [Path(run.file) for run in recording.runs if run.file]
-    if target.exists():
-        for item in inputs:
-            if _same_file(item, target):
-                raise RecordingError(f"{out_display}: is an input ({os.fspath(item)}); refusing to write onto it")
+    refuse_inputs([Path(run.file) for run in recording.runs if run.file])
     write_recording(out_display, recording, compression=compression)
     return recording
 
