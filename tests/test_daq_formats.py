@@ -285,3 +285,44 @@ def test_convert_setup_to_contract_h5_identifies_the_same(sim):
         ref = ident.to_dict()["parameters"][key]
         assert abs(result[key]["value"] - ref["value"]) < 0.1 * ref["std"], key
     os.remove(folder / "converted.h5")
+
+
+TEXT_DIALECTS = [
+    ("semicolon, decimal comma, units in header", "Time [s];Hammer [V];A_Y [V]\n0,0;1,5;2\n0,1;2,5;3\n0,2;3,5;4\n",
+     [("Hammer", "V"), ("A_Y", "V")], 10.0),
+    ("spaces", "Time Hammer A_Y\n0.0 1.5 2\n0.1 2.5 3\n0.2 3.5 4\n", [("Hammer", None), ("A_Y", None)], 10.0),
+    ("tab, decimal comma, parenthesised unit", "t (ms)\tHammer (V)\tA_Y\n0\t1,5\t2\n100\t2,5\t3\n200\t3,5\t4\n",
+     [("Hammer", "V"), ("A_Y", None)], 10.0),
+    ("comma and space, comments, quotes", '# DAQ export\n# 3 channels\n"Time","Hammer","A_Y"\n'
+     '"0.0", "1.5", "2"\n"0.1", "2.5", "3"\n"0.2", "3.5", "4"\n', [("Hammer", None), ("A_Y", None)], 10.0),
+    ("integers only: either decimal mark reads them alike", "Time;Hammer;A_Y\n0;1;2\n1;2;3\n2;3;4\n",
+     [("Hammer", None), ("A_Y", None)], 1.0),
+]
+
+
+@pytest.mark.parametrize("text, channels, rate", [d[1:] for d in TEXT_DIALECTS], ids=[d[0] for d in TEXT_DIALECTS])
+def test_text_dialects(tmp_path, text, channels, rate):
+    from guidefit.io._daq import RunOptions
+    from guidefit.io.text import open_daq
+
+    (tmp_path / "x.txt").write_text(text)
+    daq = open_daq(tmp_path / "x.txt", "x.txt", RunOptions("t.toml: runs.a"))
+    assert [(c.name, c.unit) for c in daq.channels] == channels
+    assert daq.rate_for(daq.channels) == pytest.approx(rate, rel=1e-12)
+    block = daq.make_source(daq.channels, np.float64).read((slice(0, 3), slice(None)))
+    np.testing.assert_allclose(block, [[1.5, 2], [2.5, 3], [3.5, 4]] if rate == 10.0 else [[1, 2], [2, 3], [3, 4]])
+
+
+@pytest.mark.parametrize("text, message", [
+    ("Time\tHammer\tA_Y\n0.0\t1,5\t2\n0,1\t2,5\t3\n0,2\t3,5\t4\n", r"line 2 above the data rows is numbers too"),
+    ("Time;Hammer;A_Y\n0,0;1;2\n0,1;2;3\n0,2;3;4\nEND\n", r"x.txt: line 5, column 'Time': 'END' is not a number"),
+    ("x\n1\n2\n", r"no rows of two or more numbers found .* give delimiter = .* decimal = .* in t.toml: runs.a"),
+])
+def test_text_that_cannot_be_read_is_one_line(tmp_path, text, message):
+    from guidefit.io._daq import RunOptions
+    from guidefit.io.text import open_daq
+
+    (tmp_path / "x.txt").write_text(text)
+    with pytest.raises(ValueError, match=message):
+        daq = open_daq(tmp_path / "x.txt", "x.txt", RunOptions("t.toml: runs.a"))
+        daq.make_source(daq.channels, np.float64)

@@ -4,8 +4,8 @@ DAQ software writes text in many dialects. This reader detects them from the
 first lines of the file (:func:`detect_dialect`):
 
 - the field delimiter (``,`` ``;`` tab or runs of spaces) and the decimal mark
-  (``.`` or ``,``): every candidate pair is tried on the lines, the data block
-  is the longest run of lines at the end of the sample that all parse as the
+  (``.`` or ``,``): every candidate pair is tried on the first lines, the
+  data block is the longest run of consecutive lines that all parse as the
   same number (>= 2) of numbers, and the candidates that find a block must
   agree on its numbers (``1;2`` reads the same with either decimal mark);
 - comment and preamble lines before the header (anything above the data
@@ -100,6 +100,8 @@ class Dialect:
         The header fields as written (``"Hammer [V]"``).
     note : str
         Why there is no header, when there is none.
+    quoted : bool
+        The data rows put numbers in double quotes (removed before parsing).
     """
 
     delimiter: str
@@ -110,6 +112,7 @@ class Dialect:
     units: tuple[str | None, ...]
     header_text: tuple[str, ...] | None = None
     note: str = ""
+    quoted: bool = False
 
 
 def _split(line: str, delimiter: str) -> list[str]:
@@ -141,25 +144,25 @@ def _number(field: str, decimal: str) -> float | None:
 
 
 def _data_block(lines: list[tuple[int, str]], delimiter: str, decimal: str):
-    """(n_fields, index of the block's first line, numbers of the block) of the numeric
-    lines at the end of ``lines``, or None."""
-    block: list[list[float]] = []
-    n_fields = None
-    first = len(lines)
-    for i in range(len(lines) - 1, -1, -1):
-        fields = _split(lines[i][1], delimiter)
+    """(n_fields, index of the block's first line, numbers of the block): the longest run of
+    consecutive lines that all read as the same number (>= 2) of numbers (the later one of
+    equal runs), or None. Lines after it (a footer) fail later with their line number."""
+    best = None
+    run: list[list[float]] = []
+    n_fields = first = None
+    for i, (_, text) in enumerate(lines + [(0, "")]):
+        fields = _split(text, delimiter) if text else []
         values = [_number(f, decimal) for f in fields]
-        if not fields or any(v is None for v in values):
-            break
-        if n_fields is None:
-            n_fields = len(fields)
-        elif len(fields) != n_fields:
-            break
-        block.append(values)
-        first = i
-    if n_fields is None or n_fields < 2:
+        ok = len(fields) >= 2 and all(v is not None for v in values)
+        if ok and run and len(fields) == n_fields:
+            run.append(values)
+            continue
+        if run and (best is None or len(run) >= len(best[2])):
+            best = (n_fields, first, run)
+        run, n_fields, first = ([values], len(fields), i) if ok else ([], None, None)
+    if best is None:
         return None
-    return n_fields, first, np.array(block[::-1])
+    return best[0], best[1], np.array(best[2])
 
 
 def _looks_like_units(fields: list[str]) -> bool:
@@ -216,6 +219,8 @@ def detect_dialect(lines: list[tuple[int, str]], display: str, where: str,
             found.append((d, m, *block))
     if not found:
         return _no_block(lines, display, keys, delimiter, decimal)
+    longest = max(len(f[4]) for f in found)  # a reading that stops early (at '1,5' for '.') is not one
+    found = [f for f in found if len(f[4]) == longest]
     d, m, n_fields, first, numbers = found[0]
     for d2, m2, n2, first2, numbers2 in found[1:]:
         same = n2 == n_fields and first2 == first and np.array_equal(numbers2, numbers, equal_nan=True)
@@ -245,6 +250,11 @@ def _no_block(lines, display, keys, delimiter, decimal) -> Dialect:
 def _header(lines, first, d, m, n_fields, display, keys) -> Dialect:
     data_line = lines[first][0]
     above = [_split(text, d) for _, text in lines[max(0, first - 2):first]]
+    if above and all(_number(f, ".") is not None or _number(f, ",") is not None for f in above[-1]):
+        raise RecordingError(
+            f"{display}: line {lines[first - 1][0]} above the data rows is numbers too, but does not read "
+            f"with {_SHOWN[d]} between fields and '{m}' as decimal mark like the rows below; {keys}"
+        )
     header = units = header_text = None
     note = ""
     if above and len(above[-1]) == n_fields and _looks_like_units(above[-1]) and len(above) == 2 \
@@ -264,7 +274,8 @@ def _header(lines, first, d, m, n_fields, display, keys) -> Dialect:
         header = tuple(p[0] for p in pairs)
         header_units = tuple(p[1] for p in pairs)
         units = tuple((u or h) for u, h in zip(units or (None,) * n_fields, header_units))
-    return Dialect(d, m, n_fields, data_line, header, units or (None,) * n_fields, header_text, note)
+    quoted = any('"' in text for _, text in lines[first:])
+    return Dialect(d, m, n_fields, data_line, header, units or (None,) * n_fields, header_text, note, quoted)
 
 
 def _clip(text: str, width: int = 40) -> str:
@@ -331,12 +342,13 @@ def parse_columns(path: Path, display: str, dialect: Dialect, columns: list[int]
             lines = list(itertools.islice(fh, ROWS_PER_BLOCK))
             if not lines:
                 break
-            text = [ln.replace(",", ".") for ln in lines] if dialect.decimal == "," else lines
+            text = [ln.replace('"', "") for ln in lines] if dialect.quoted else lines
+            text = [ln.replace(",", ".") for ln in text] if dialect.decimal == "," else text
             try:
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore", UserWarning)  # a block of blank lines
                     block = np.loadtxt(text, delimiter=delimiter, usecols=columns, dtype=np.float64,
-                                       comments=None, ndmin=2, quotechar='"')
+                                       comments=None, ndmin=2)
             except (ValueError, IndexError) as exc:
                 raise _locate(lines, line_no, dialect, columns, names, display, exc) from None
             if block.size:
