@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import json
 import re
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -405,3 +407,28 @@ def test_convert_refuses_an_input_under_another_name(simulated_setup, monkeypatc
     result = CliRunner().invoke(main, ["convert", "test.toml", "-o", "alias.csv"])
     assert result.exit_code == 2 and "is an input (vertical.csv)" in result.stderr
     assert (simulated_setup / "vertical.csv").read_bytes() == before
+
+
+@pytest.mark.parametrize("damage", ["truncated", "junk"])
+def test_damaged_daq_file_is_one_line_without_library_logs(folder, damage):
+    """npTDMS logs warnings about a short last segment; the command line shows one line only."""
+    from nptdms import ChannelObject, TdmsWriter
+
+    t = np.arange(20000) / RATE
+    with TdmsWriter(folder / "long.tdms") as writer:
+        for k in range(4):
+            part = slice(5000 * k, 5000 * (k + 1))
+            writer.write_segment([ChannelObject("g", name, x[part], properties={"wf_increment": 1 / RATE})
+                                  for name, x in (("Hammer", np.sin(t)), ("AccA_Y", np.cos(t)),
+                                                  ("AccB_Y", np.sin(2 * t)))])
+    raw = (folder / "long.tdms").read_bytes()
+    (folder / "vertical.tdms").write_bytes(raw[: len(raw) // 2 + 7] if damage == "truncated" else b"junk" * 50)
+    text = GOOD.replace("sensitivity_mv", "scale").split("[runs.lateral]")[0]
+    (folder / "test.toml").write_text(text)
+    # a real process: the libraries' log handlers write to the process's stderr
+    result = subprocess.run([sys.executable, "-m", "guidefit", "identify", "test.toml"], capture_output=True,
+                            text=True, cwd=folder, timeout=120)
+    assert result.returncode == 2
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1, lines
+    assert lines[0].startswith("guidefit: error: vertical.tdms: ")

@@ -267,6 +267,30 @@ class _OpenColumns:
         return out
 
 
+@contextlib.contextmanager
+def quiet_logger(name: str) -> Iterator[None]:
+    """A library's log messages below ERROR held back while it reads (npTDMS and asammdf log
+    warnings about damaged files to stderr; guidefit reports what matters in one line).
+
+    >>> import logging
+    >>> with quiet_logger("nptdms"):
+    ...     logging.getLogger("nptdms").level
+    40
+    """
+    import logging
+
+    names = [name] + [n for n in list(logging.Logger.manager.loggerDict) if n.startswith(name + ".")]
+    loggers = [logging.getLogger(n) for n in names]
+    levels = [logger.level for logger in loggers]
+    for logger in loggers:
+        pass
+    try:
+        yield
+    finally:
+        for logger, level in zip(loggers, levels):
+            logger.setLevel(level)
+
+
 def common_dtype(dtypes) -> np.dtype:
     """float32 when every channel is float32, else float64 (integers are read as float64).
 

@@ -332,6 +332,7 @@ def _open_v73(path: Path, display: str, options: RunOptions) -> DaqFile:
         display=display,
         channels=tuple(channels),
         ambiguous=ambiguous,
+        note="" if channels else "no numeric MATLAB variables (datasets with a MATLAB_class attribute)",
         sample_rate_hz=rate,
         rate_origin=origin,
         make_source=lambda chans, dtype: MatH5Source(

@@ -40,7 +40,7 @@ import numpy as np
 
 from guidefit.errors import RecordingError
 from guidefit.io._checks import _first_line, _require
-from guidefit.io._daq import ColumnSource, DaqChannel, DaqFile, RunOptions, rate_from_time
+from guidefit.io._daq import ColumnSource, DaqChannel, DaqFile, RunOptions, quiet_logger, rate_from_time
 from guidefit.io.registry import FileFormat
 
 __all__ = ["MdfSource", "open_daq"]
@@ -57,11 +57,12 @@ class MdfSource(ColumnSource):
     def _open(self):
         from asammdf import MDF
 
-        mdf = MDF(self.facts["path"])
-        try:
-            yield mdf
-        finally:
-            mdf.close()
+        with quiet_logger("asammdf"):
+            mdf = MDF(self.facts["path"])
+            try:
+                yield mdf
+            finally:
+                mdf.close()
 
     def _read(self, handle, start, stop, keys):
         return [
@@ -101,7 +102,8 @@ def open_daq(path: Path, display: str, options: RunOptions) -> DaqFile:
     """
     asammdf = _require("asammdf", "daq", display, "ASAM MDF")
     try:
-        mdf = asammdf.MDF(str(path))
+        with quiet_logger("asammdf"):
+            mdf = asammdf.MDF(str(path))
     except Exception as exc:  # noqa: BLE001 - asammdf raises its own MdfException and others
         raise RecordingError(f"{display}: not a readable MDF file ({_first_line(exc)})") from None
     try:
@@ -162,19 +164,20 @@ def _group_rate(path: str, display: str, group: int, n: int) -> float:
     from asammdf import MDF
 
     where = f"{display}: channel group {group}: time channel"
-    mdf = MDF(path)
-    try:
-        def read(a, b):
-            return mdf.get_master(group, record_offset=a, record_count=b - a)
-
+    with quiet_logger("asammdf"):
+        mdf = MDF(path)
         try:
-            return rate_from_time(read, n, where)
-        except RecordingError:
-            raise
-        except Exception as exc:  # noqa: BLE001 - asammdf's own errors on a damaged block
-            raise RecordingError(f"{where}: cannot be read ({_first_line(exc)})") from None
-    finally:
-        mdf.close()
+            def read(a, b):
+                return mdf.get_master(group, record_offset=a, record_count=b - a)
+
+            try:
+                return rate_from_time(read, n, where)
+            except RecordingError:
+                raise
+            except Exception as exc:  # noqa: BLE001 - asammdf's own errors on a damaged block
+                raise RecordingError(f"{where}: cannot be read ({_first_line(exc)})") from None
+        finally:
+            mdf.close()
 
 
 FORMATS = (

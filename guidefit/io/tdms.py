@@ -38,7 +38,7 @@ import numpy as np
 
 from guidefit.errors import RecordingError
 from guidefit.io._checks import _first_line, _require
-from guidefit.io._daq import ColumnSource, DaqChannel, DaqFile, RunOptions, nice_rate
+from guidefit.io._daq import ColumnSource, DaqChannel, DaqFile, RunOptions, nice_rate, quiet_logger
 from guidefit.io.registry import FileFormat
 
 __all__ = ["TdmsSource", "open_daq"]
@@ -53,7 +53,7 @@ class TdmsSource(ColumnSource):
     def _open(self):
         from nptdms import TdmsFile
 
-        with TdmsFile.open(self.facts["path"]) as f:
+        with quiet_logger("nptdms"), TdmsFile.open(self.facts["path"]) as f:
             yield f
 
     def _read(self, handle, start, stop, keys):
@@ -101,7 +101,8 @@ def open_daq(path: Path, display: str, options: RunOptions) -> DaqFile:
     """
     nptdms = _require("nptdms", "daq", display, "NI TDMS")
     try:
-        f = nptdms.TdmsFile.read_metadata(str(path))
+        with quiet_logger("nptdms"):
+            f = nptdms.TdmsFile.read_metadata(str(path))
         groups = list(f.groups())
     except (ValueError, KeyError, OSError, EOFError, RuntimeError, TypeError) as exc:
         raise RecordingError(f"{display}: not a readable TDMS file ({_first_line(exc)})") from None
