@@ -326,3 +326,21 @@ def test_text_that_cannot_be_read_is_one_line(tmp_path, text, message):
     with pytest.raises(ValueError, match=message):
         daq = open_daq(tmp_path / "x.txt", "x.txt", RunOptions("t.toml: runs.a"))
         daq.make_source(daq.channels, np.float64)
+
+
+def test_text_time_column_written_with_few_digits(tmp_path):
+    """Times written to 1e-5 s at 51.2 kHz (a quarter sample period) still give the rate; a dropped
+    sample (a gap of one period) is refused."""
+    from guidefit.io._daq import RunOptions
+    from guidefit.io.text import open_daq
+
+    n, fs = 20000, 51200.0
+    t = np.arange(n) / fs
+    rows = [f"{a:.5f};{np.sin(a * 1e3):.6f};{np.cos(a * 1e3):.6f}".replace(".", ",") for a in t]
+    (tmp_path / "x.csv").write_text("Time [s];Hammer;A_Y\n" + "\n".join(rows) + "\n")
+    daq = open_daq(tmp_path / "x.csv", "x.csv", RunOptions("t.toml: runs.a"))
+    assert daq.rate_for(daq.channels) == pytest.approx(fs, rel=1e-7)
+    (tmp_path / "x.csv").write_text("Time [s];Hammer;A_Y\n" + "\n".join(rows[:10000] + rows[10001:]) + "\n")
+    daq = open_daq(tmp_path / "x.csv", "x.csv", RunOptions("t.toml: runs.a"))
+    with pytest.raises(ValueError, match=r"x.csv: time column 'Time': spacing not uniform"):
+        daq.rate_for(daq.channels)

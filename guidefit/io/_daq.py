@@ -283,7 +283,7 @@ def quiet_logger(name: str) -> Iterator[None]:
     loggers = [logging.getLogger(n) for n in names]
     levels = [logger.level for logger in loggers]
     for logger in loggers:
-        pass
+        logger.setLevel(max(logger.level, logging.ERROR))
     try:
         yield
     finally:
@@ -323,10 +323,12 @@ def nice_rate(rate: float) -> float:
 _TIME_CHUNK = 1 << 20
 
 
-def rate_from_time(read: Callable[[int, int], np.ndarray], n: int, where: str) -> float:
+def rate_from_time(read: Callable[[int, int], np.ndarray], n: int, where: str, resolution_s: float = 0.0) -> float:
     """The sample rate of a time axis read in chunks: least-squares slope, checked for uniform spacing.
 
     ``read(start, stop)`` gives times (s) ``start:stop``; memory is one chunk.
+    ``resolution_s`` is the step of times written with few digits (a text export's
+    ``12.34568``: 1e-5 s); a time may be off by half of it besides 0.1 sample period.
 
     Raises
     ------
@@ -367,9 +369,12 @@ def rate_from_time(read: Callable[[int, int], np.ndarray], n: int, where: str) -
         t = np.asarray(read(a, min(n, a + _TIME_CHUNK)), dtype=np.float64).reshape(-1)
         kc = np.arange(a, a + t.size, dtype=np.float64) - k_mean
         worst = max(worst, float(np.max(np.abs(t - t_mean - kc / fs))) * fs)
-    if worst > 0.1:
+    allowed = 0.1 + 0.5 * resolution_s * fs
+    if worst > allowed:
+        printed = f", {allowed - 0.1:.2g} of them from the {resolution_s:.3g} s the times are written to" \
+            if resolution_s else ""
         raise RecordingError(
-            f"{where}: spacing not uniform (a sample is {worst:.2g} sample periods off); "
-            "expected a constant sample rate"
+            f"{where}: spacing not uniform (a sample is {worst:.2g} sample periods off, {allowed:.2g} allowed"
+            f"{printed}); expected a constant sample rate"
         )
     return nice_rate(fs)

@@ -73,7 +73,7 @@ _CANDIDATES = ((",", "."), (";", ","), (";", "."), ("\t", "."), ("\t", ","), (" 
 _NUMBER_RE = re.compile(r"^[+-]?((\d+\.?\d*|\.\d+)([eE][+-]?\d+)?|nan|inf|infinity)$", re.IGNORECASE)
 _UNIT_IN_NAME_RE = re.compile(r"^(?P<name>.*?)\s*(\[(?P<u1>[^\[\]]*)\]|\((?P<u2>[^()]*)\))\s*$")
 _UNIT_RE = re.compile(r"^[\[(]?\s*[A-Za-zµμ°%/^*.·²³0-9 _-]{0,16}\s*[\])]?$")
-_TIME_RE = re.compile(r"^(time|t|zeit|temps|tiempo|tempo|time_s|t_s)$", re.IGNORECASE)
+_TIME_RE = re.compile(r"^(time|t|zeit|temps|tiempo|tempo|time_s|t_s|x_value)$", re.IGNORECASE)
 _TIME_UNITS = {None: 1.0, "": 1.0, "s": 1.0, "sec": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6, "μs": 1e-6}
 _SHOWN = {",": "','", ";": "';'", "\t": "tab", " ": "spaces"}
 
@@ -285,12 +285,12 @@ def _clip(text: str, width: int = 40) -> str:
 # ------------------------------------------------------------------ reading
 
 
-def _encoding(path: Path) -> str:
+def _encoding(path: Path, display: str) -> str:
     """utf-8 (with or without BOM) if the head decodes as such, else cp1252 (Windows exports)."""
     with open(path, "rb") as fh:
         head = fh.read(_HEAD_BYTES)
     if b"\x00" in head:
-        raise RecordingError(f"{path.name}: contains NUL bytes; expected a text export")
+        raise RecordingError(f"{display}: contains NUL bytes; expected a text export")
     try:
         head.decode("utf-8")
     except UnicodeDecodeError as exc:
@@ -380,6 +380,36 @@ def _locate(lines, first_no, dialect, columns, names, display, exc) -> Recording
     return RecordingError(f"{display}: cannot read the data rows ({_first_line(exc)})")
 
 
+def _step_of(text: str, decimal: str) -> float:
+    """The step between numbers written like ``text``: ``12,34568`` -> 1e-5, ``2.5e+01`` -> 1.0.
+
+    >>> _step_of("12,34568", ","), _step_of("2.5e+01", "."), _step_of("7", ".")
+    (1e-05, 1.0, 1.0)
+    """
+    text = _unquote(text).strip().lstrip("+-")
+    mantissa, _, exponent = text.lower().partition("e")
+    digits = len(mantissa.partition(decimal)[2])
+    try:
+        power = int(exponent) if exponent else 0
+    except ValueError:
+        return 0.0
+    return float(f"1e{power - digits}")
+
+
+def _printed_step(path: Path, encoding: str, dialect: Dialect, column: int) -> float:
+    """The step of the numbers in ``column`` as the last data row writes them (the largest times
+    have the fewest decimals), read from the end of the file."""
+    with open(path, "rb") as fh:
+        fh.seek(0, 2)
+        fh.seek(max(0, fh.tell() - 4096))
+        tail = fh.read().decode(encoding.replace("-sig", ""), errors="replace")
+    for line in reversed(tail.splitlines()):
+        fields = _split(line, dialect.delimiter)
+        if len(fields) == dialect.n_fields and _number(fields[column], dialect.decimal) is not None:
+            return _step_of(fields[column], dialect.decimal)
+    return 0.0
+
+
 class TextSource(ColumnSource):
     """Columns of a text export, parsed once into memory (only those a run uses)."""
 
@@ -409,7 +439,7 @@ def open_daq(path: Path, display: str, options: RunOptions) -> DaqFile:
     """
     if options.group is not None:
         raise RecordingError(f"{options.where}: group: a text export holds one run; remove the key")
-    encoding = _encoding(path)
+    encoding = _encoding(path, display)
     dialect = detect_dialect(_head(path, encoding), display, options.where, options.delimiter, options.decimal)
     n = dialect.n_fields
     names = list(dialect.header) if dialect.header else [str(k) for k in range(n)]
@@ -458,7 +488,9 @@ def open_daq(path: Path, display: str, options: RunOptions) -> DaqFile:
             return None
         cols = with_time(chans)
         t = table(cols)[:, cols.index(time_col)] * time_factor
-        return rate_from_time(lambda a, b: t[a:b], t.size, f"{display}: time column '{names[time_col]}'")
+        resolution = _printed_step(path, encoding, dialect, time_col) * time_factor
+        return rate_from_time(lambda a, b: t[a:b], t.size, f"{display}: time column '{names[time_col]}'",
+                              resolution_s=resolution)
 
     def make_source(chans, dtype):
         cols = with_time(chans)
