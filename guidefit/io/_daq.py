@@ -352,8 +352,13 @@ def rate_from_time(read: Callable[[int, int], np.ndarray], n: int, where: str, r
         if not np.all(np.isfinite(t)):
             raise RecordingError(f"{where}: holds non-finite times")
         steps = np.diff(t if previous is None else np.concatenate([[previous], t]))
-        if np.any(steps <= 0):
-            raise RecordingError(f"{where}: times not increasing near sample {a}; expected equally spaced times")
+        # times written to a step coarser than the sample period repeat; they never decrease
+        bad = steps < 0 if resolution_s > 0 else steps <= 0
+        if np.any(bad):
+            k = a + int(np.flatnonzero(bad)[0]) - (previous is not None)
+            raise RecordingError(
+                f"{where}: times not increasing at sample {k + 1}; expected equally spaced times"
+            )
         previous = t[-1]
         t_sum += float(t.sum())
     t_mean = t_sum / n
@@ -363,6 +368,8 @@ def rate_from_time(read: Callable[[int, int], np.ndarray], n: int, where: str, r
         kc = np.arange(a, a + t.size, dtype=np.float64) - k_mean
         skk += float(kc @ kc)
         skt += float(kc @ (t - t_mean))
+    if not skt > 0:
+        raise RecordingError(f"{where}: all times equal; expected equally spaced times")
     fs = skk / skt
     worst = 0.0
     for a in range(0, n, _TIME_CHUNK):
