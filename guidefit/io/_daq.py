@@ -345,9 +345,10 @@ def rate_from_time(read: Callable[[int, int], np.ndarray], n: int, where: str, r
     if n < 2:
         raise RecordingError(f"{where}: {n} sample(s); a time axis needs two to give a sample rate")
     k_mean = (n - 1) / 2.0
-    t_sum = 0.0
+    t0 = None  # times are taken relative to the first (MDF time channels may hold epoch seconds)
     previous = None
-    for a in range(0, n, _TIME_CHUNK):
+    t_sum = skk = skt = 0.0
+    for a in range(0, n, _TIME_CHUNK):  # pass 1: checks and the least-squares sums
         t = np.asarray(read(a, min(n, a + _TIME_CHUNK)), dtype=np.float64).reshape(-1)
         if not np.all(np.isfinite(t)):
             raise RecordingError(f"{where}: holds non-finite times")
@@ -360,20 +361,18 @@ def rate_from_time(read: Callable[[int, int], np.ndarray], n: int, where: str, r
                 f"{where}: times not increasing at sample {k + 1}; expected equally spaced times"
             )
         previous = t[-1]
-        t_sum += float(t.sum())
-    t_mean = t_sum / n
-    skk = skt = 0.0
-    for a in range(0, n, _TIME_CHUNK):
-        t = np.asarray(read(a, min(n, a + _TIME_CHUNK)), dtype=np.float64).reshape(-1)
+        t0 = t[0] if t0 is None else t0
         kc = np.arange(a, a + t.size, dtype=np.float64) - k_mean
         skk += float(kc @ kc)
-        skt += float(kc @ (t - t_mean))
+        skt += float(kc @ (t - t0))  # = sum (k - k_mean)(t - t_mean): sum (k - k_mean) is 0
+        t_sum += float(np.sum(t - t0))
     if not skt > 0:
         raise RecordingError(f"{where}: all times equal; expected equally spaced times")
     fs = skk / skt
+    t_mean = t_sum / n
     worst = 0.0
-    for a in range(0, n, _TIME_CHUNK):
-        t = np.asarray(read(a, min(n, a + _TIME_CHUNK)), dtype=np.float64).reshape(-1)
+    for a in range(0, n, _TIME_CHUNK):  # pass 2: every time within tolerance of the line
+        t = np.asarray(read(a, min(n, a + _TIME_CHUNK)), dtype=np.float64).reshape(-1) - t0
         kc = np.arange(a, a + t.size, dtype=np.float64) - k_mean
         worst = max(worst, float(np.max(np.abs(t - t_mean - kc / fs))) * fs)
     allowed = 0.1 + 0.5 * resolution_s * fs
