@@ -432,3 +432,17 @@ def test_damaged_daq_file_is_one_line_without_library_logs(folder, damage):
     lines = [line for line in result.stderr.splitlines() if line.strip()]
     assert len(lines) == 1, lines
     assert lines[0].startswith("guidefit: error: vertical.tdms: ")
+
+
+def test_unknown_point_and_unknown_guide_name_the_key(folder):
+    text = GOOD.replace("[channels.acc_B_y]", "[channels.acc_E_y]")
+    (folder / "test.toml").write_text(text)
+    with pytest.raises(SetupError, match=r"^test\.toml: channels\.acc_E_y: .*point 'E' has no default position .*"
+                                         r"give position_m$"):
+        read_recording("test.toml")
+    rec_e = text.replace('source = "AccB_Y"', 'source = "AccB_Y"\nposition_m = [0.0, 0.01, 0.0]')
+    (folder / "test.toml").write_text(rec_e)  # a position given: only the axis comes from the name
+    np.testing.assert_allclose(read_recording("test.toml").runs[0].channels[2].direction, [0.0, 1.0, 0.0])
+    (folder / "test.toml").write_text(GOOD.replace('guide = "MRB35"', 'guide = "NOSUCH99"'))
+    with pytest.raises(SetupError, match=r"^test\.toml: guide: "):
+        read_recording("test.toml")

@@ -24,6 +24,13 @@ Modules
 ``csv``                   the recording contract in CSV
 ``uff``                   UFF-58 time data and FRFs (pyuff, extra ``uff``)
 ``frf_files``             guidefit's ``frf.csv`` / ``frf.h5``
+``setup``                 test setups (``.toml``): DAQ files read in place
+                          as a :class:`Recording`; :func:`~guidefit.io.setup.convert`
+``tdms``, ``mdf``,        the DAQ readers a setup uses (formats of kind
+``mat``, ``wav``,         ``"daq"``: NI TDMS, ASAM MDF 4, MATLAB v5/v7.3,
+``text``                  WAV, text exports; extra ``daq``)
+``_daq``                  what a DAQ reader gives a setup (``DaqFile``,
+                          ``ColumnSource``)
 ``watchdog``              the forked, time-limited HDF5 metadata read
 ``geometry``              default sensor positions from a guide's points
 ``_checks``               validation helpers

@@ -551,20 +551,28 @@ def _run_rate(picked, daq: DaqFile, run: SetupRun, display: str) -> float:
 
 
 def _geometry(setup: Setup, run: SetupRun, chans: list[SetupChannel]):
-    need = [ch.name for ch in chans if ch.position_m is None or ch.direction is None]
-    pos = {ch.name: ch.position_m for ch in chans}
-    dirs = {ch.name: ch.direction for ch in chans}
-    if need:
-        try:
-            dpos, ddir = default_channel_geometry(need, run.excitation_direction, run.excitation_position_m,
-                                                  guide=setup.guide)
-        except GuidefitError as exc:
-            table = next(n for n in need if n != "force") if any(n != "force" for n in need) else "force"
-            raise SetupError(f"{setup.path}: channels.{table}: {exc}") from None
-        for k, name in enumerate(need):
-            pos[name] = dpos[k] if pos[name] is None else pos[name]
-            dirs[name] = ddir[k] if dirs[name] is None else dirs[name]
-    return [pos[ch.name] for ch in chans], [dirs[ch.name] for ch in chans]
+    """Each channel's position and direction: as given, else from the guide's points and its name."""
+    from guidefit.errors import GuideError
+
+    positions, directions = [], []
+    for ch in chans:
+        pos, direction = ch.position_m, ch.direction
+        if pos is None or direction is None:
+            match = _ACC_RE.match(ch.name)
+            points = {match.group(1): pos} if pos is not None and match else None  # only the axis is needed
+            try:
+                dpos, ddir = default_channel_geometry([ch.name], run.excitation_direction,
+                                                      run.excitation_position_m, guide=setup.guide, points=points)
+            except GuideError as exc:
+                raise SetupError(f"{setup.path}: guide: {exc}") from None
+            except GuidefitError as exc:
+                text = str(exc).replace("give positions_m", "give position_m")
+                raise SetupError(f"{setup.path}: channels.{ch.name}: {text}") from None
+            pos = dpos[0] if pos is None else pos
+            direction = ddir[0] if direction is None else direction
+        positions.append(pos)
+        directions.append(direction)
+    return positions, directions
 
 
 def _open_daq(setup: Setup, run: SetupRun):
