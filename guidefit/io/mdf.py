@@ -108,6 +108,8 @@ def open_daq(path: Path, display: str, options: RunOptions) -> DaqFile:
         raise RecordingError(f"{display}: not a readable MDF file ({_first_line(exc)})") from None
     try:
         groups = list(mdf.groups)
+        masters = dict(mdf.masters_db)  # group index -> index of its time channel (MDF 3 and 4 alike)
+        version4 = str(mdf.version) >= "4"
         only = _group_index(options, len(groups), display)
         channels, aliases, ambiguous, by_name = [], {}, {}, {}
         for gi, group in enumerate(groups):
@@ -115,9 +117,9 @@ def open_daq(path: Path, display: str, options: RunOptions) -> DaqFile:
                 continue
             n = int(group.channel_group.cycles_nr)
             for ci, c in enumerate(group.channels):
-                if c.channel_type in _MASTER_TYPES:
+                if masters.get(gi) == ci or (version4 and c.channel_type in _MASTER_TYPES):
                     continue
-                is_float32 = c.data_type in _FLOAT_TYPES and c.bit_count == 32 and c.conversion is None
+                is_float32 = version4 and c.data_type in _FLOAT_TYPES and c.bit_count == 32 and c.conversion is None
                 ch = DaqChannel(
                     name=c.name,
                     key=(gi, ci),
