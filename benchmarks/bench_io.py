@@ -176,7 +176,6 @@ WRITERS = {
 
 
 def _daq_rows(size_mb: float, bytes_per_row: float):
-    header, _ = _header_and_rows(1)
     rows = int(size_mb * 1e6 / bytes_per_row)
     return _header_and_rows(rows)
 

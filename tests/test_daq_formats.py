@@ -243,7 +243,7 @@ def test_european_text_export(sim):
 
 def test_uff58_time_data_through_a_setup(sim, tmp_path):
     pytest.importorskip("pyuff")
-    data, folder, ident = sim
+    data = sim[0]
     short = data.runs[0]
     cut = replace_data(short, short.data[:4000])
     write_recording(tmp_path / "v.uff", cut)

@@ -349,7 +349,7 @@ def _text_keys(table: dict, fmt: FileFormat, file_display: str, where: str):
     delimiter = decimal = None
     if "delimiter" in table:
         value = table["delimiter"]
-        if not isinstance(value, str) or value.lower() not in DELIMITERS and value not in DELIMITERS:
+        if not isinstance(value, str) or (value.lower() not in DELIMITERS and value not in DELIMITERS):
             raise SetupError(
                 f"{where}: delimiter must be ',', ';', '\\t' (tab) or ' ' (spaces), got {_show(value)}"
             )
@@ -489,7 +489,7 @@ def _select(setup: Setup, run: SetupRun, daq: DaqFile) -> list[tuple[SetupChanne
     if len(picked) < 2:
         first = next(setup.channels[n] for n in names if n != "force")
         raise daq.missing(first.source)
-    for ch, dc in picked:
+    for _, dc in picked:
         if np.dtype(dc.dtype).kind not in "fiu":
             raise SetupError(f"{daq.display}: channel '{dc.name}' holds {np.dtype(dc.dtype)}, not numbers")
     return picked
