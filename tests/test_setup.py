@@ -446,3 +446,19 @@ def test_unknown_point_and_unknown_guide_name_the_key(folder):
     (folder / "test.toml").write_text(GOOD.replace('guide = "MRB35"', 'guide = "NOSUCH99"'))
     with pytest.raises(SetupError, match=r"^test\.toml: guide: "):
         read_recording("test.toml")
+
+
+def test_tdms_channels_that_start_apart_are_refused(folder):
+    """Two channels of one group with different wf_start_offset are not one time base."""
+    from nptdms import ChannelObject, TdmsWriter
+
+    t = np.arange(N) / RATE
+    with TdmsWriter(folder / "vertical.tdms") as writer:
+        writer.write_segment([
+            ChannelObject("g", name, np.sin(t), properties={"wf_increment": 1 / RATE, "wf_start_offset": start,
+                                                            "unit_string": "V"})
+            for name, start in (("Hammer", 0.0), ("AccA_Y", 0.0), ("AccB_Y", 0.002))
+        ])
+    (folder / "test.toml").write_text(GOOD.split("[runs.lateral]")[0])
+    with pytest.raises(SetupError, match=r"^vertical\.tdms: channels 'Hammer' and 'AccB_Y' start 2 ms apart"):
+        read_recording("test.toml")

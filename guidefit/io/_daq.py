@@ -73,6 +73,10 @@ class DaqChannel:
         Its own sample rate, where the format keeps one per channel (TDMS).
     dtype : numpy.dtype
         dtype of the samples as the library returns them.
+    start : tuple of (int, float) or None
+        When its first sample was taken, where the format says per channel (TDMS
+        ``wf_start_time`` in ns since 1970 and ``wf_start_offset`` in s); the
+        channels of a run must start together.
     """
 
     name: str
@@ -81,6 +85,7 @@ class DaqChannel:
     unit: str | None = None
     sample_rate_hz: float | None = None
     dtype: np.dtype = field(default_factory=lambda: np.dtype(np.float64))
+    start: tuple | None = None
 
 
 @dataclass(frozen=True)

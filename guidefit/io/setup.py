@@ -524,6 +524,19 @@ def _run_length(picked, daq: DaqFile) -> int:
     return n
 
 
+def _check_starts(picked, daq: DaqFile, rate: float) -> None:
+    """Channels that say when they started must start within half a sample of each other."""
+    starts = [(dc, dc.start) for _, dc in picked if dc.start is not None]
+    for dc, (ns, offset) in starts[1:]:
+        first, (ns0, offset0) = starts[0]
+        apart = (ns - ns0) * 1e-9 + (offset - offset0)
+        if abs(apart) * rate > 0.5:
+            raise SetupError(
+                f"{daq.display}: channels '{first.name}' and '{dc.name}' start {apart * 1e3:.6g} ms apart "
+                "(wf_start_time, wf_start_offset); a run's channels need one time base"
+            )
+
+
 def _run_rate(picked, daq: DaqFile, run: SetupRun, display: str) -> float:
     chans = tuple(dc for _, dc in picked)
     if daq.rate_for is not None:
@@ -586,6 +599,7 @@ def _make_run(setup: Setup, run: SetupRun, daq: DaqFile, picked) -> Run:
         _check_units(ch, dc, daq, setup.path)
     n = _run_length(picked, daq)
     rate = _run_rate(picked, daq, run, setup.path)
+    _check_starts(picked, daq, rate)
     chans = [ch for ch, _ in picked]
     positions, directions = _geometry(setup, run, chans)
     try:

@@ -71,6 +71,19 @@ def _rate(channel) -> float | None:
     return nice_rate(1.0 / inc)
 
 
+def _start(channel) -> tuple | None:
+    """(wf_start_time in ns since 1970, wf_start_offset in s), or None when neither is given."""
+    props = channel.properties
+    if "wf_start_time" not in props and "wf_start_offset" not in props:
+        return None
+    try:
+        ns = int(np.datetime64(props.get("wf_start_time", np.datetime64(0, "ns")), "ns").astype(np.int64))
+        offset = float(props.get("wf_start_offset", 0.0))
+    except (TypeError, ValueError):
+        return None
+    return ns, offset
+
+
 def _dtype(channel) -> np.dtype:
     scaled = any(str(k).startswith("NI_Scal") or str(k) == "NI_Number_Of_Scales" for k in channel.properties)
     try:
@@ -126,6 +139,7 @@ def open_daq(path: Path, display: str, options: RunOptions) -> DaqFile:
                 unit=str(c.properties.get("unit_string", "")).strip() or None,
                 sample_rate_hz=_rate(c),
                 dtype=_dtype(c),
+                start=_start(c),
             )
             channels.append(ch)
             aliases[f"{g.name}/{c.name}"] = ch
