@@ -462,3 +462,22 @@ def test_tdms_channels_that_start_apart_are_refused(folder):
     (folder / "test.toml").write_text(GOOD.split("[runs.lateral]")[0])
     with pytest.raises(SetupError, match=r"^vertical\.tdms: channels 'Hammer' and 'AccB_Y' start 2 ms apart"):
         read_recording("test.toml")
+
+
+def test_docs_setup_examples_are_valid(tmp_path):
+    """Every TOML block of docs/recordings.md parses; the full example passes the setup check."""
+    import tomllib
+    from pathlib import Path
+
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "recordings.md").read_text()
+    blocks = re.findall(r"```toml\n(.*?)```", doc, re.S)
+    assert len(blocks) >= 7  # the full example, TDMS, MDF, MAT, WAV, text, UFF
+    for block in blocks:
+        tomllib.loads(block)
+    full = next(b for b in blocks if b.startswith('format = "guidefit-setup"'))
+    for name in ("vertical.tdms", "lateral.tdms"):
+        (tmp_path / name).write_bytes(b"placeholder")
+    (tmp_path / "test.toml").write_text(full)
+    setup = load_setup(tmp_path / "test.toml")
+    assert list(setup.channels) == ["force", "acc_A_y", "acc_B_y"] and [r.name for r in setup.runs] == [
+        "vertical", "lateral"]
