@@ -378,6 +378,10 @@ def test_cli_identify_frf_and_convert_take_a_setup(simulated_setup, monkeypatch)
     assert abs(pa["c_V"]["value"] - pb["c_V"]["value"]) < 0.1 * pb["c_V"]["std"]
     frf = runner.invoke(main, ["frf", "test.toml"])
     assert frf.exit_code == 0, frf.output
+    # the simulated carriage is the nominal model: explain finds nothing to explain
+    explained = runner.invoke(main, ["explain", "test.toml", "--json", "--no-jackknife"])
+    assert explained.exit_code == 0, explained.output
+    assert json.loads(explained.stdout)["verdict"] == "adequate"
     out = runner.invoke(main, ["convert", "test.toml", "-o", "converted.h5"])
     assert out.exit_code == 0, out.output
     assert "wrote converted.h5: vertical" in out.stdout
