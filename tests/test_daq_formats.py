@@ -344,3 +344,17 @@ def test_text_time_column_written_with_few_digits(tmp_path):
     daq = open_daq(tmp_path / "x.csv", "x.csv", RunOptions("t.toml: runs.a"))
     with pytest.raises(ValueError, match=r"x.csv: time column 'Time': spacing not uniform"):
         daq.rate_for(daq.channels)
+
+
+def test_text_utf16_with_bom(tmp_path):
+    """Windows 'Unicode text' (UTF-16 LE with BOM, tabs): read like any other export."""
+    from guidefit.io._daq import RunOptions
+    from guidefit.io.text import open_daq
+
+    rows = "".join(f"{k / 1000:.3f}\t{k}.5\t-{k}.25\r\n".replace(".", ",") for k in range(50))
+    (tmp_path / "x.txt").write_bytes(("Zeit [s]\tKraft [V]\tBeschl. µ [V]\r\n" + rows).encode("utf-16"))
+    daq = open_daq(tmp_path / "x.txt", "x.txt", RunOptions("t.toml: runs.a"))
+    assert [(c.name, c.unit) for c in daq.channels] == [("Kraft", "V"), ("Beschl. µ", "V")]
+    assert daq.rate_for(daq.channels) == pytest.approx(1000.0, rel=1e-12)
+    np.testing.assert_allclose(daq.make_source(daq.channels, np.float64).read((slice(48, 50), slice(None))),
+                               [[48.5, -48.25], [49.5, -49.25]])

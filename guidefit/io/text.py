@@ -286,9 +286,12 @@ def _clip(text: str, width: int = 40) -> str:
 
 
 def _encoding(path: Path, display: str) -> str:
-    """utf-8 (with or without BOM) if the head decodes as such, else cp1252 (Windows exports)."""
+    """UTF-16 with its byte-order mark ("Unicode text" of Windows programs); utf-8 (with or
+    without BOM) if the head decodes as such; else cp1252 (Windows exports)."""
     with open(path, "rb") as fh:
         head = fh.read(_HEAD_BYTES)
+    if head[:2] in (b"\xff\xfe", b"\xfe\xff"):
+        return "utf-16"
     if b"\x00" in head:
         raise RecordingError(f"{display}: contains NUL bytes; expected a text export")
     try:
@@ -400,8 +403,10 @@ def _printed_step(path: Path, encoding: str, dialect: Dialect, column: int) -> f
     """The step of the numbers in ``column`` as the last data row writes them (the largest times
     have the fewest decimals), read from the end of the file."""
     with open(path, "rb") as fh:
+        if encoding == "utf-16":
+            encoding = "utf-16-le" if fh.read(2) == b"\xff\xfe" else "utf-16-be"
         fh.seek(0, 2)
-        fh.seek(max(0, fh.tell() - 4096))
+        fh.seek(max(2, fh.tell() - 4096) & ~1)  # whole UTF-16 code units
         tail = fh.read().decode(encoding.replace("-sig", ""), errors="replace")
     for line in reversed(tail.splitlines()):
         fields = _split(line, dialect.delimiter)
