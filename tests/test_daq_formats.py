@@ -358,3 +358,29 @@ def test_text_utf16_with_bom(tmp_path):
     assert daq.rate_for(daq.channels) == pytest.approx(1000.0, rel=1e-12)
     np.testing.assert_allclose(daq.make_source(daq.channels, np.float64).read((slice(48, 50), slice(None))),
                                [[48.5, -48.25], [49.5, -49.25]])
+
+
+@pytest.mark.parametrize("version", ["v5", "v73"])
+@pytest.mark.parametrize("in_struct", [False, True])
+def test_mat_vectors_columns_rate_and_time(tmp_path, version, in_struct):
+    """A vector, columns of a samples x channels array, and Fs or t, at the root or in a struct."""
+    import scipy.io
+
+    from guidefit.io._daq import RunOptions
+    from guidefit.io.mat import open_daq
+
+    n = 300
+    t = np.arange(n) / 2048.0
+    hammer, acc = np.sin(t * 50), np.column_stack([np.cos(t * 50), t])
+    variables = {"Hammer": hammer, "acc": acc, ("t" if in_struct else "Fs"): t if in_struct else 2048.0}
+    path = tmp_path / "x.mat"
+    if version == "v5":
+        scipy.io.savemat(path, {"rec": variables} if in_struct else variables)
+    else:
+        write_mat73(path, variables, group="rec" if in_struct else None)
+    daq = open_daq(path, "x.mat", RunOptions("t.toml: runs.a", group="rec" if in_struct else None))
+    assert sorted(c.name for c in daq.channels) == ["Hammer", "acc:0", "acc:1"]
+    assert daq.sample_rate_hz == pytest.approx(2048.0, rel=1e-12)
+    chans = (daq.find("Hammer"), daq.find("acc:1"))
+    block = daq.make_source(chans, np.float64).read((slice(10, 20), slice(None)))
+    np.testing.assert_allclose(block, np.column_stack([hammer[10:20], acc[10:20, 1]]), rtol=1e-15)
