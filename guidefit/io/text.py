@@ -267,7 +267,7 @@ def _header(lines, first, d, m, n_fields, display, keys) -> Dialect:
         no = lines[first - 1][0]
         note = (
             f"line {no} above the data has {len(above[-1])} field(s) with {_SHOWN[d]} between fields, "
-            f"the data rows {n_fields}; if it is the header, {keys}"
+            f"the data rows {n_fields}; if it is the header, {keys}, or name the columns by index (0-based)"
         )
     if header_text is not None:
         pairs = [_name_and_unit(f) for f in header_text]
