@@ -230,15 +230,18 @@ def _v73_guarded(p: Path, display: str, group) -> dict:
 # ------------------------------------------------------------------- channels
 
 
-def _channels(variables: dict, key_of) -> tuple[list, dict]:
-    """DaqChannels of the vectors and of the columns of 2-D arrays; wide arrays explained."""
-    channels, ambiguous = [], {}
+def _channels(variables: dict, key_of) -> tuple[list, dict, dict]:
+    """DaqChannels of the vectors and of the columns of 2-D arrays; ``name:0`` of a column
+    vector (n x 1, a 2-D array in MATLAB); wide arrays explained."""
+    channels, ambiguous, aliases = [], {}, {}
     for name, (shape, dtype, *_rest) in variables.items():
         if name in RATE_NAMES + TIME_NAMES:
             continue
         rows, cols = shape
         if rows == 1 or cols == 1:
             channels.append(DaqChannel(name, key_of(name, None, shape), max(rows, cols), dtype=dtype))
+            if cols == 1:
+                aliases[f"{name}:0"] = channels[-1]
         elif rows >= cols:
             channels.extend(
                 DaqChannel(f"{name}:{k}", key_of(name, k, shape), rows, dtype=dtype) for k in range(cols)
@@ -249,7 +252,7 @@ def _channels(variables: dict, key_of) -> tuple[list, dict]:
                     f"variable '{name}' is {rows} x {cols}; '{name}:k' is column k of an array whose rows "
                     f"are samples: transpose it ({name}.') where it is written"
                 )
-    return channels, ambiguous
+    return channels, ambiguous, aliases
 
 
 def _scalar_rate(variables: dict, display: str) -> tuple[float | None, str]:
@@ -299,11 +302,12 @@ def open_daq(path: Path, display: str, options: RunOptions) -> DaqFile:
         fs_time = rate_from_time(lambda a, b: t[a:b], t.size, f"{display}: time variable '{time_name}'")
         _check_time(display, time_name, shape, t.size, rate, fs_time)
         rate, origin = (rate, origin) if rate is not None else (fs_time, f"time variable '{time_name}'")
-    channels, ambiguous = _channels(variables, lambda name, col, shape: (name, col))
+    channels, ambiguous, aliases = _channels(variables, lambda name, col, shape: (name, col))
     return DaqFile(
         display=display,
         channels=tuple(channels),
         ambiguous=ambiguous,
+        aliases=aliases,
         sample_rate_hz=rate,
         rate_origin=origin,
         make_source=lambda chans, dtype: MatSource(
@@ -327,11 +331,12 @@ def _open_v73(path: Path, display: str, options: RunOptions) -> DaqFile:
                                      f"{display}: time variable '{time_name}'")
         _check_time(display, time_name, shape, n, rate, fs_time)
         rate, origin = (rate, origin) if rate is not None else (fs_time, f"time variable '{time_name}'")
-    channels, ambiguous = _channels(variables, lambda name, col, shape: (variables[name][2], col))
+    channels, ambiguous, aliases = _channels(variables, lambda name, col, shape: (variables[name][2], col))
     return DaqFile(
         display=display,
         channels=tuple(channels),
         ambiguous=ambiguous,
+        aliases=aliases,
         note="" if channels else "no numeric MATLAB variables (datasets with a MATLAB_class attribute)",
         sample_rate_hz=rate,
         rate_origin=origin,
