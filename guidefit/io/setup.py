@@ -495,12 +495,19 @@ def _select(setup: Setup, run: SetupRun, daq: DaqFile) -> list[tuple[SetupChanne
     return picked
 
 
+def _has(daq: DaqFile, source: str) -> bool:
+    try:
+        return daq.find(source) is not None
+    except RecordingError:  # names several channels: it is there
+        return True
+
+
 def _check_all_found(setup: Setup, opened: list) -> None:
     """A channel no run's file has is a typo, not a sensor moved between runs: one line naming
     the first file that should have had it."""
     found = {ch.name for _, _, picked in opened for ch, _ in picked}
     for name, ch in setup.channels.items():
-        if name in found:
+        if name in found or any(_has(daq, ch.source) for _, daq, _ in opened):
             continue
         for run, daq, _ in opened:
             if run.channels is None:
