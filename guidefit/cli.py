@@ -491,6 +491,20 @@ def report_cmd(recording, out_path, guide_name, candidates, estimator, no_jackkn
     click.echo(f"report written to {out_path}")
 
 
+@main.command(name="convert")
+@click.argument("source", type=click.Path(dir_okay=False))
+@click.option("-o", "--out", "out_path", required=True, type=click.Path(dir_okay=False),
+              help="Recording to write in the contract format: .h5 (any runs), .csv (one run) or .uff.")
+@click.option("--compression", type=click.Choice(["gzip", "lzf"]), help="HDF5 filter for the samples.")
+def convert_cmd(source, out_path, compression):
+    """Write a test setup (or any recording) to the recording contract; never onto an input."""
+    from guidefit.io.setup import convert
+
+    recording = convert(source, out_path, compression=compression)
+    runs = ", ".join(f"{run.name} ({run.n_samples} samples, {run.n_channels} channels)" for run in recording.runs)
+    click.echo(f"wrote {out_path}: {runs}")
+
+
 @main.command(name="simulate")
 @click.option("--guide", "guide_name", default="MRB35", show_default=True,
               help="Built-in guide name or path to a guide TOML file.")

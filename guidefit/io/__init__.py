@@ -26,6 +26,13 @@ Modules
 ``frf_files``             guidefit's ``frf.csv`` / ``frf.h5``; FRF files as input
                           (``FrfFile``, ``read_input``)
 ``uff_frf``               UFF-58 FRFs in (function types 4 and 6)
+``setup``                 test setups (``.toml``): DAQ files read in place
+                          as a :class:`Recording`; :func:`~guidefit.io.setup.convert`
+``tdms``, ``mdf``,        the DAQ readers a setup uses (formats of kind
+``mat``, ``wav``,         ``"daq"``: NI TDMS, ASAM MDF 4, MATLAB v5/v7.3,
+``text``                  WAV, text exports; extra ``daq``)
+``_daq``                  what a DAQ reader gives a setup (``DaqFile``,
+                          ``ColumnSource``)
 ``watchdog``              the forked, time-limited HDF5 metadata read
 ``geometry``              default sensor positions from a guide's points
 ``_checks``               validation helpers

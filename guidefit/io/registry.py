@@ -25,7 +25,7 @@ from guidefit.errors import RecordingError
 
 __all__ = ["FileFormat", "format_for", "formats", "read_recording", "write_frfs", "write_recording"]
 
-KINDS = ("recording", "frf")
+KINDS = ("recording", "frf", "daq")
 _PACKAGE = __name__.rpartition(".")[0]  # guidefit.io: its modules are found by path, not imported
 _PACKAGE_DIR = Path(__file__).resolve().parent
 _NOT_FORMATS = {"registry", "records", "geometry", "watchdog"}  # modules without FORMATS
@@ -41,13 +41,15 @@ class FileFormat:
         Shown in messages and in ``docs/recordings.md`` (``"NI TDMS"``).
     suffixes : tuple of str
         Lower-case file suffixes with the dot (``(".tdms",)``).
-    kind : {"recording", "frf"}
-        What the file holds: time data (a :class:`~guidefit.io.records.Recording`)
-        or FRFs (``FrfSet`` objects).
+    kind : {"recording", "frf", "daq"}
+        What the file holds: time data (a :class:`~guidefit.io.records.Recording`),
+        FRFs (``FrfSet`` objects), or a DAQ's time data that only a test setup
+        can make a recording of (:mod:`guidefit.io.setup`).
     read : callable or None
         ``read(path: pathlib.Path, display: str)``: a ``Recording`` (kind
         ``recording``) or a :class:`~guidefit.io.frf_files.FrfFile` (kind ``frf``:
-        the ``FrfSet`` of each run with its run and channel metadata). ``display``
+        the ``FrfSet`` of each run with its run and channel metadata); kind ``daq``:
+        ``read(path, display, options)`` gives a :class:`~guidefit.io._daq.DaqFile`. ``display``
         is the path as the user gave it, for messages. The registry has
         already checked that the file exists, is a file and is not empty.
         Every malformed input raises one-line ``RecordingError``.

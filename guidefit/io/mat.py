@@ -1,0 +1,351 @@
+"""MATLAB .mat files (MATLAB, Simcenter, Data Physics exports) as a test setup's DAQ files.
+
+Versions 5 to 7 are read with :func:`scipy.io.loadmat` (only the variables a
+run uses, held in memory: the format does not stream); version 7.3 is HDF5
+and read with h5py in slices (bounded memory). A setup's ``source`` is a
+variable name (a vector) or ``variable:k`` for column ``k`` (0-based) of a
+2-D array whose rows are samples (MATLAB's ``n x channels``). A run's
+``group`` is the name of a struct whose fields are the variables. The sample
+rate comes from a scalar variable ``fs``, ``Fs`` or ``sample_rate_hz``, or a
+time vector ``t`` or ``time`` (seconds, uniformly spaced); if both exist
+they must agree. .mat files state no units.
+
+MATLAB stores arrays column-major: in a v7.3 (HDF5) file an ``n x k``
+MATLAB array is a dataset of shape ``(k, n)``, so column ``k`` of the
+MATLAB array is row ``k`` of the dataset, and a vector is ``(1, n)`` or
+``(n, 1)``. The HDF5 file is checked as the recording contract's is
+(links, external storage, virtual datasets; :mod:`guidefit.io.hdf5`).
+
+Examples
+--------
+>>> import os, tempfile
+>>> import numpy as np
+>>> import scipy.io
+>>> from guidefit.io._daq import RunOptions
+>>> with tempfile.TemporaryDirectory() as folder:
+...     path = os.path.join(folder, "hit.mat")
+...     scipy.io.savemat(path, {"data": np.arange(12.0).reshape(6, 2), "fs": 51200.0})
+...     daq = open_daq(Path(path), "hit.mat", RunOptions("test.toml: runs.a"))
+...     ch = daq.find("data:1")
+...     block = daq.make_source((ch,), np.float64).read((slice(0, 3), slice(None)))
+>>> daq.sample_rate_hz, [c.name for c in daq.channels], block[:, 0].tolist()
+(51200.0, ['data:0', 'data:1'], [1.0, 3.0, 5.0])
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import math
+from pathlib import Path
+
+import numpy as np
+
+from guidefit.errors import RecordingError
+from guidefit.io._checks import _first_line
+from guidefit.io._daq import ColumnSource, DaqChannel, DaqFile, RunOptions, nice_rate, rate_from_time, same_rate
+from guidefit.io.registry import FileFormat
+
+__all__ = ["MatH5Source", "MatSource", "open_daq"]
+
+SUFFIXES = (".mat",)
+RATE_NAMES = ("fs", "Fs", "sample_rate_hz")
+TIME_NAMES = ("t", "time")
+_HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+_NUMERIC_CLASSES = {"double", "single", "int8", "uint8", "int16", "uint16", "int32", "uint32", "int64", "uint64"}
+
+
+def _is_v73(path: Path) -> bool:
+    """Whether the file is HDF5 (MATLAB 7.3 puts the signature after a 512-byte header)."""
+    with open(path, "rb") as fh:
+        head = fh.read(520)
+    return head[:8] == _HDF5_SIGNATURE or head[512:520] == _HDF5_SIGNATURE
+
+
+# --------------------------------------------------------------------- sources
+
+
+class MatSource(ColumnSource):
+    """Variables of a MAT v5 file (loaded once, only those a run uses); keys are (variable, column or None)."""
+
+    def _arrays(self) -> dict:
+        cache = getattr(self, "_cache", None)
+        if cache is None:
+            cache = _load_v5(self.facts["path"], self.facts["group"], sorted({k[0] for k in self.keys}))
+            self._cache = cache
+        return cache
+
+    def _read(self, handle, start, stop, keys):
+        arrays = self._arrays()
+        return [_v5_column(arrays[name], col)[start:stop] for name, col in keys]
+
+
+class MatH5Source(ColumnSource):
+    """Variables of a MAT v7.3 (HDF5) file read in slices; keys are (dataset path, row or None)."""
+
+    @contextlib.contextmanager
+    def _open(self):
+        import h5py
+
+        with h5py.File(self.facts["path"], "r") as f:
+            yield f
+
+    def _read(self, handle, start, stop, keys):
+        return [_h5_slice(handle[name], row, start, stop) for name, row in keys]
+
+
+def _h5_slice(ds, row, start, stop):
+    if row is not None:
+        return ds[row, start:stop]
+    return ds[0, start:stop] if ds.shape[0] == 1 else ds[start:stop, 0]
+
+
+# ------------------------------------------------------------------- version 5
+
+
+def _load_v5(path: str, group, names) -> dict:
+    import scipy.io
+
+    if group is None:
+        return scipy.io.loadmat(path, variable_names=list(names))
+    struct = scipy.io.loadmat(path, variable_names=[group], simplify_cells=True)[group]
+    return {name: np.asarray(struct[name]) for name in names if name in struct}
+
+
+def _v5_column(arr, col):
+    arr = np.asarray(arr)
+    if col is None:
+        return arr.reshape(-1)
+    return arr[:, col]
+
+
+def _numeric(arr) -> bool:
+    return isinstance(arr, np.ndarray) and arr.dtype.kind in "fiu" and arr.size > 0
+
+
+def _v5_variables(path: Path, display: str, options: RunOptions) -> dict:
+    """name -> (shape, dtype, array or None): the file's numeric variables (of the struct ``group``)."""
+    import scipy.io
+
+    try:
+        listing = scipy.io.whosmat(str(path))
+        if options.group is None:
+            small = [n for n, shape, _ in listing if n in RATE_NAMES + TIME_NAMES]
+            loaded = scipy.io.loadmat(str(path), variable_names=small) if small else {}
+            out = {}
+            for name, shape, cls in listing:
+                if cls in _NUMERIC_CLASSES:
+                    out[name] = (tuple(shape), np.dtype(np.float32 if cls == "single" else np.float64),
+                                 loaded.get(name))
+            return out
+        group = str(options.group)
+        structs = [n for n, _, cls in listing if cls == "struct"]
+        if group not in structs:
+            raise RecordingError(
+                f"{options.where}: group '{group}' is not a struct in {display}; the file has "
+                f"{'structs ' + ', '.join(structs) if structs else 'no structs'}"
+            )
+        struct = scipy.io.loadmat(str(path), variable_names=[group], simplify_cells=True)[group]
+    except RecordingError:
+        raise
+    except (ValueError, TypeError, OSError, KeyError, NotImplementedError, EOFError) as exc:
+        raise RecordingError(f"{display}: not a readable MAT file ({_first_line(exc)})") from None
+    if not isinstance(struct, dict):
+        raise RecordingError(f"{options.where}: group '{group}' in {display} is a struct array; expected one struct")
+    out = {}
+    for name, value in struct.items():
+        arr = np.asarray(value) if not isinstance(value, (str, dict, list)) else None
+        if arr is not None and _numeric(arr):
+            arr2 = arr.reshape(-1, 1) if arr.ndim <= 1 else arr
+            out[name] = (arr2.shape, np.dtype(np.float32 if arr.dtype == np.float32 else np.float64), arr2)
+    return out
+
+
+# ----------------------------------------------------------------- version 7.3
+
+
+def _v73_variables(p: Path, display: str, group) -> dict:
+    """name -> (MATLAB shape, dtype, dataset path, value of a scalar or None), metadata only.
+
+    Run in a forked child with a deadline when the HDF5 guard is on (damaged HDF5
+    metadata can make the library loop; :mod:`guidefit.io.watchdog`).
+    """
+    import h5py
+
+    from guidefit.io.hdf5 import _check_storage, _get_checked, _h5_open_error
+
+    try:
+        f = h5py.File(p, "r")
+    except OSError as exc:
+        raise _h5_open_error(p, display, exc) from None
+    with f:
+        node = f
+        if group is not None:
+            node = _get_checked(f, str(group), f"{display}: group '{group}'")
+            if not isinstance(node, h5py.Group):
+                structs = [k for k in f if isinstance(f.get(k), h5py.Group) and not k.startswith("#")]
+                raise RecordingError(
+                    f"{display}: '{group}' is not a struct; the file has "
+                    f"{'structs ' + ', '.join(structs) if structs else 'no structs'}"
+                )
+        out = {}
+        for name in node:
+            if name.startswith("#"):
+                continue
+            obj = _get_checked(node, name, f"{display}: variable '{name}'")
+            if not isinstance(obj, h5py.Dataset):
+                continue
+            cls = obj.attrs.get("MATLAB_class", b"")
+            cls = cls.decode() if isinstance(cls, bytes) else str(cls)
+            if cls not in _NUMERIC_CLASSES or obj.ndim != 2 or obj.dtype.kind not in "fiu" or obj.size == 0:
+                continue
+            if bool(obj.attrs.get("MATLAB_empty", 0)):
+                continue
+            _check_storage(obj, p, f"{display}: variable '{name}'")
+            shape = (int(obj.shape[1]), int(obj.shape[0]))  # MATLAB's rows x columns
+            value = float(obj[0, 0]) if obj.size == 1 else None
+            out[name] = (shape, np.dtype(np.float32 if obj.dtype == np.float32 else np.float64), obj.name, value)
+        return out
+
+
+def _v73_metadata(p: Path, display: str, group) -> dict:
+    from guidefit.io.watchdog import can_fork, in_child, timeout_s
+
+    read = functools.partial(_v73_guarded, group=group)
+    timeout = timeout_s()
+    if timeout > 0 and can_fork():
+        return in_child(read, p, display, timeout)
+    return read(p, display)
+
+
+def _v73_guarded(p: Path, display: str, group) -> dict:
+    try:
+        return _v73_variables(p, display, group)
+    except RecordingError:
+        raise
+    except (OSError, RuntimeError, KeyError, ValueError, TypeError) as exc:
+        raise RecordingError(f"{display}: damaged MAT 7.3 (HDF5) file ({_first_line(exc)})") from None
+
+
+# ------------------------------------------------------------------- channels
+
+
+def _channels(variables: dict, key_of) -> tuple[list, dict, dict]:
+    """DaqChannels of the vectors and of the columns of 2-D arrays; ``name:0`` of a column
+    vector (n x 1, a 2-D array in MATLAB); wide arrays explained."""
+    channels, ambiguous, aliases = [], {}, {}
+    for name, (shape, dtype, *_rest) in variables.items():
+        if name in RATE_NAMES + TIME_NAMES:
+            continue
+        rows, cols = shape
+        if rows == 1 or cols == 1:
+            channels.append(DaqChannel(name, key_of(name, None, shape), max(rows, cols), dtype=dtype))
+            if cols == 1:
+                aliases[f"{name}:0"] = channels[-1]
+        elif rows >= cols:
+            channels.extend(
+                DaqChannel(f"{name}:{k}", key_of(name, k, shape), rows, dtype=dtype) for k in range(cols)
+            )
+        else:
+            for k in range(cols):
+                ambiguous[f"{name}:{k}"] = (
+                    f"variable '{name}' is {rows} x {cols}; '{name}:k' is column k of an array whose rows "
+                    f"are samples: transpose it ({name}.') where it is written"
+                )
+    return channels, ambiguous, aliases
+
+
+def _scalar_rate(variables: dict, display: str) -> tuple[float | None, str]:
+    for name in RATE_NAMES:
+        if name in variables:
+            shape, _, *rest = variables[name]
+            value = rest[-1]
+            if isinstance(value, np.ndarray):
+                value = float(value.reshape(-1)[0]) if value.size == 1 else None
+            if shape not in ((1, 1),) or value is None or not math.isfinite(value) or value <= 0:
+                raise RecordingError(f"{display}: variable '{name}' must be one positive number (Hz)")
+            return nice_rate(float(value)), f"variable '{name}'"
+    return None, ""
+
+
+def _check_time(display: str, name: str, shape, n_time: int, rate: float | None, fs_time: float):
+    rows, cols = shape
+    if rows != 1 and cols != 1:
+        raise RecordingError(f"{display}: time variable '{name}' is {rows} x {cols}; expected a vector")
+    if rate is not None and not same_rate(rate, fs_time):
+        raise RecordingError(
+            f"{display}: time variable '{name}' gives {fs_time:.9g} Hz but the rate variable says {rate:.9g} Hz"
+        )
+
+
+def open_daq(path: Path, display: str, options: RunOptions) -> DaqFile:
+    """The variables of a .mat file (v5-v7: scipy.io; v7.3: h5py) for a setup's run.
+
+    Raises
+    ------
+    RecordingError
+        Not a MAT file; an unknown struct; a rate variable that is not one
+        positive number; a time variable that is not uniform or disagrees
+        with the rate variable.
+    """
+    if _is_v73(path):
+        return _open_v73(path, display, options)
+    variables = _v5_variables(path, display, options)
+    group = None if options.group is None else str(options.group)
+    rate, origin = _scalar_rate(variables, display)
+    time_name = next((n for n in TIME_NAMES if n in variables), None)
+    if time_name is not None:
+        shape, _, arr = variables[time_name]
+        if arr is None:
+            arr = _load_v5(str(path), group, [time_name])[time_name]
+        t = np.asarray(arr, dtype=np.float64).reshape(-1)
+        fs_time = rate_from_time(lambda a, b: t[a:b], t.size, f"{display}: time variable '{time_name}'")
+        _check_time(display, time_name, shape, t.size, rate, fs_time)
+        rate, origin = (rate, origin) if rate is not None else (fs_time, f"time variable '{time_name}'")
+    channels, ambiguous, aliases = _channels(variables, lambda name, col, shape: (name, col))
+    return DaqFile(
+        display=display,
+        channels=tuple(channels),
+        ambiguous=ambiguous,
+        aliases=aliases,
+        sample_rate_hz=rate,
+        rate_origin=origin,
+        make_source=lambda chans, dtype: MatSource(
+            keys=[ch.key for ch in chans], n_samples=chans[0].n_samples, dtype=dtype, path=str(path), group=group
+        ),
+    )
+
+
+def _open_v73(path: Path, display: str, options: RunOptions) -> DaqFile:
+    import h5py
+
+    variables = _v73_metadata(path, display, options.group)
+    rate, origin = _scalar_rate(variables, display)
+    time_name = next((n for n in TIME_NAMES if n in variables), None)
+    if time_name is not None:
+        shape, _, ds_path, _ = variables[time_name]
+        with h5py.File(path, "r") as f:
+            ds = f[ds_path]
+            n = max(shape)
+            fs_time = rate_from_time(lambda a, b: _h5_slice(ds, None, a, b), n,
+                                     f"{display}: time variable '{time_name}'")
+        _check_time(display, time_name, shape, n, rate, fs_time)
+        rate, origin = (rate, origin) if rate is not None else (fs_time, f"time variable '{time_name}'")
+    channels, ambiguous, aliases = _channels(variables, lambda name, col, shape: (variables[name][2], col))
+    return DaqFile(
+        display=display,
+        channels=tuple(channels),
+        ambiguous=ambiguous,
+        aliases=aliases,
+        note="" if channels else "no numeric MATLAB variables (datasets with a MATLAB_class attribute)",
+        sample_rate_hz=rate,
+        rate_origin=origin,
+        make_source=lambda chans, dtype: MatH5Source(
+            keys=[ch.key for ch in chans], n_samples=chans[0].n_samples, dtype=dtype, path=str(path)
+        ),
+    )
+
+
+FORMATS = (
+    FileFormat(name="MATLAB .mat (v5-v7.3)", suffixes=SUFFIXES, kind="daq", read=open_daq, streaming=False),
+)
