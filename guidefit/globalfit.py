@@ -174,7 +174,7 @@ def _participation(f: np.ndarray, H: np.ndarray, poles: np.ndarray) -> np.ndarra
     A = modes_mod._stack(modes_mod._basis(s, poles, modes_mod._DEFAULT_RESIDUALS))
     norm = np.sqrt(np.sum(A**2, axis=0))
     norm[norm == 0] = 1.0
-    B = np.linalg.lstsq(A / norm, modes_mod._stack(H), rcond=None)[0] / norm[:, None]
+    B = modes_mod._ls_fit(A / norm, modes_mod._stack(H))[1] / norm[:, None]
     res = B[0 : 2 * poles.size : 2] + 1j * B[1 : 2 * poles.size : 2]  # (n, O)
     return 2j * poles.imag[:, None] * res
 
@@ -437,7 +437,7 @@ class _Fit:
     nrmse: float
 
 
-def _solve_shared(prob: _Shared, init, band, *, uncertainty=True, max_nfev=200) -> _Fit:
+def _solve_shared(prob: _Shared, init, band, *, uncertainty=True, max_nfev=200, tol=1e-12) -> _Fit:
     import scipy.optimize
 
     from guidefit import modes as modes_mod
@@ -455,7 +455,7 @@ def _solve_shared(prob: _Shared, init, band, *, uncertainty=True, max_nfev=200) 
 
     res = scipy.optimize.least_squares(lambda x: prob.residual(*split(x)), x0, jac=lambda x: prob.jacobian(*split(x)),
                                        bounds=(lo, hi), method="trf", max_nfev=max_nfev,
-                                       xtol=1e-12, ftol=1e-12, gtol=1e-12)
+                                       xtol=tol, ftol=tol, gtol=tol)
     wn, z = split(res.x)
     order = np.argsort(wn)
     wn, z = wn[order], z[order]
@@ -475,7 +475,7 @@ def _solve_shared(prob: _Shared, init, band, *, uncertainty=True, max_nfev=200) 
     return _Fit(modes, resid, math.sqrt(cost / float(np.sum(prob.Y**2))))
 
 
-def _refine(prob: _Shared, band, init, *, uncertainty=True, max_nfev=200):
+def _refine(prob: _Shared, band, init, *, uncertainty=True, max_nfev=200, tol=1e-12):
     """Variable-projection fit from ``init`` [(f, zeta)]; modes that leave the band or hit a bound are
     dropped and the rest refitted. None when nothing is left."""
     from guidefit import modes as modes_mod
@@ -486,7 +486,7 @@ def _refine(prob: _Shared, band, init, *, uncertainty=True, max_nfev=200):
             init = init[:-1]
             continue
         try:
-            fit = _solve_shared(prob, init, band, uncertainty=uncertainty, max_nfev=max_nfev)
+            fit = _solve_shared(prob, init, band, uncertainty=uncertainty, max_nfev=max_nfev, tol=tol)
         except (ValueError, np.linalg.LinAlgError):
             init = init[:-1]
             continue
@@ -544,7 +544,7 @@ def _jackknife(frfs: list, band, modes, groups, shifts) -> list:
     zk = [[] for _ in modes]
     for g in range(n_groups):
         H = np.hstack([(s[g] if g < len(s) else x).H for s, x in zip(subs, banded)])
-        fit = _refine(_Shared(banded[0].frequency_hz, H, groups, shifts), band, init, uncertainty=False, max_nfev=30)
+        fit = _refine(_Shared(banded[0].frequency_hz, H, groups, shifts), band, init, uncertainty=False, max_nfev=30, tol=1e-9)
         if fit is None or len(fit.modes) != len(modes):
             continue
         for k, m in enumerate(fit.modes):
@@ -579,7 +579,7 @@ def _selection_spread(prob: _Shared, band, modes, sel: PoleSelection, diagram: S
     df = np.zeros(len(modes))
     dz = np.zeros(len(modes))
     for init in alternatives:
-        fit = _refine(prob, band, sorted(init), uncertainty=False, max_nfev=60)
+        fit = _refine(prob, band, sorted(init), uncertainty=False, max_nfev=60, tol=1e-9)
         if fit is None:
             continue
         for k, j in enumerate(_match(fit.modes, modes)):
@@ -665,3 +665,37 @@ def global_fit(frf_by_run: dict, band_hz: tuple, *, orders: Sequence[int] = rang
         parts.append({"fit": (m.frequency_std_hz, m.damping_std), "jackknife": (jf, jz), "selection": (sf, sz)})
         out.append(replace(m, frequency_std_hz=_rss(m.frequency_std_hz, jf, sf), damping_std=_rss(m.damping_std, jz, sz)))
     return GlobalFit(out, columns, runs, band, f, fit.residuals, diagram, selection, parts, excluded, fit.nrmse)
+
+
+def run_estimates(gf: GlobalFit, frf_by_run: dict, min_share: float = 0.01) -> dict:
+    """Each run's own (f, zeta) of every global mode: the run's FRFs refitted alone from the global poles.
+
+    A diagnostic beside the shared-pole fit, and what keeps runs that differ
+    only in hit force apart (an amplitude-dependent joint gives each its own
+    frequency). Returns ``{run: [Mode or None per global mode]}``; None where
+    the run shows less than ``min_share`` of the mode's largest modal
+    constant over the runs or where its refit drifts from the global pole
+    (by more than ``zeta f`` in frequency).
+    """
+    out: dict = {}
+    lo, hi = gf.band_hz
+    amps = {run: np.array([np.linalg.norm(np.asarray(m.modal_constants)[sl]) for m in gf.modes])
+            for run, sl in gf.runs.items()}
+    top = np.max(np.array(list(amps.values())), axis=0) if amps else np.zeros(len(gf.modes))
+    for run, sl in gf.runs.items():
+        frf = frf_by_run[run]
+        sel = (frf.frequency_hz >= lo) & (frf.frequency_hz <= hi)
+        tau = getattr(frf, "exp_window_tau_s", None)
+        prob = _Shared(frf.frequency_hz[sel], np.asarray(frf.H)[sel], [slice(None)], [1.0 / tau if tau else 0.0])
+        fit = _refine(prob, gf.band_hz, [(m.frequency_hz, m.damping_ratio) for m in gf.modes], max_nfev=60)
+        row = [None] * len(gf.modes)
+        if fit is not None:
+            for k, j in enumerate(_match(fit.modes, gf.modes)):
+                m = gf.modes[k]
+                if j is None or amps[run][k] < min_share * max(top[k], 1e-300):
+                    continue
+                r = fit.modes[j]
+                if abs(r.frequency_hz - m.frequency_hz) <= m.damping_ratio * m.frequency_hz:
+                    row[k] = r
+        out[run] = row
+    return out

@@ -102,6 +102,11 @@ class IdentifySettings:
     force_levels: bool = False  # per force-level frequencies (for explain's amplitude_dependence)
     force_bins: int = 3
     min_force_ratio: float = 1.5
+    method: str = "global"  # "global": one modal model of all runs (guidefit.globalfit); "per_run": legacy fits
+
+    def __post_init__(self):
+        if self.method not in ("global", "per_run"):
+            raise ValueError(f"IdentifySettings.method must be 'global' or 'per_run', got {self.method!r}")
 
 
 @dataclass(frozen=True)
@@ -122,6 +127,11 @@ class IdentifiedMode:
     half_power: dict | None = None
     raw_damping_ratio: float | None = None
     fit: object = field(default=None, repr=False, compare=False)  # the guidefit.modes.Mode behind it
+    estimates: tuple = ()  # every run's own estimate: dicts run, level, frequency_hz, damping_ratio, stds
+    candidates: tuple = ()  # ambiguous label: ((label, energy share), ...)
+    shapes: dict = field(default_factory=dict)  # run -> channel -> modal constant (global fit: every run)
+    std_parts: dict = field(default_factory=dict)  # fit / jackknife / selection std of f and zeta
+    global_index: int | None = field(default=None, compare=False)  # index into the GlobalFit's modes
 
     def to_dict(self) -> dict:
         """JSON-ready; the contract's label/frequency_hz/damping_ratio plus extras."""
@@ -134,10 +144,18 @@ class IdentifiedMode:
             "run": self.run,
             "model_frequency_hz": self.model_frequency_hz,
             "coherence": self.coherence,
-            "method": "curve_fit",
+            "method": "curve_fit" if self.global_index is None else "global_fit",
             "damping_ratio_before_window_correction": self.raw_damping_ratio,
             "half_power": self.half_power,
             "shape": {k: float(np.real(v)) for k, v in self.shape.items()},
+            "level": "all",
+            "estimates": [dict(e) for e in self.estimates],
+            "candidates": [{"label": lab, "energy_share": share if math.isfinite(share) else None}
+                           for lab, share in self.candidates],
+            "shapes": {r: dict(v) for r, v in self.shapes.items()},
+            "std_parts": {k: dict(v) for k, v in self.std_parts.items()},
+            "motion": [float(v) for v in self.motion],
+            "energy": dict(self.energy),
         }
 
 
@@ -167,6 +185,7 @@ class Identification:
     extra_modes: tuple = ()
     missing_modes: tuple = ()
     failed_run_hits: tuple = ()  # hit rows of runs that gave no FRF (every hit rejected)
+    modal: object = field(default=None, repr=False, compare=False)  # guidefit.modal_stage.ModalResult
 
     def hit_rows(self) -> list[dict]:
         """Every hit of every run, accepted or rejected, including runs that gave no FRF."""
@@ -189,7 +208,30 @@ class Identification:
                 for ch in self._sensor_channels()
             ],
             "force_levels": [lvl for run in self.runs for lvl in run.force_levels],
+            "run_modes": self.run_modes(),
+            "method": "global_fit" if self.modal is not None else "per_run",
         }
+
+    def run_modes(self) -> list[dict]:
+        """Every run's and every force level's own f and zeta of each mode (nothing dropped).
+
+        ``level`` is ``"all"`` for a run's all-hits estimate, else the force
+        bin's index (0 = softest hits) with its mean peak force.
+        """
+        out = []
+        for m in list(self.modes) + list(self.extra_modes):
+            for e in m.estimates:
+                out.append({"label": m.label, **e})
+        for run in self.runs:
+            bins: dict = {}
+            for lvl in run.force_levels:
+                k = bins.setdefault(lvl["label"], 0)
+                bins[lvl["label"]] = k + 1
+                out.append({"label": lvl["label"], "run": lvl["run"], "level": k,
+                            "peak_force_n": lvl["peak_force_n"], "frequency_hz": lvl["frequency_hz"],
+                            "frequency_std_hz": lvl["frequency_std_hz"],
+                            "damping_ratio": lvl.get("damping_ratio"), "damping_std": lvl.get("damping_std")})
+        return out
 
     def _sensor_channels(self):
         seen = {}
@@ -654,11 +696,12 @@ def _force_levels(run, frf, rows, modes, settings, warnings: list) -> list[dict]
             if r is None:  # the mode is not reproduced by this bin's hits: a level without a frequency
                 level["refit_failed"] = True
             else:
-                f_n = r.frequency_hz
+                f_n, z_n = r.frequency_hz, r.damping_ratio
                 if frf.exp_window_tau_s:
-                    f_n, _ = frf_mod.exponential_window_damping_correction(r.damping_ratio, r.frequency_hz,
-                                                                         frf.exp_window_tau_s)
+                    f_n, z_n = frf_mod.exponential_window_damping_correction(r.damping_ratio, r.frequency_hz,
+                                                                           frf.exp_window_tau_s)
                 level["frequency_hz"], level["frequency_std_hz"] = float(f_n), r.frequency_std_hz
+                level["damping_ratio"], level["damping_std"] = float(z_n), r.damping_std
                 level["shape"] = dict(zip(names, (float(v) for v in real_shape(r.modal_constants))))
             levels.append(level)
     return levels
@@ -849,6 +892,8 @@ def identify(path, guide=None, settings: IdentifySettings | None = None) -> Iden
     if not isinstance(guide, Guide):
         guide = load_guide(guide or recording.guide or "MRB35")
     model = vib.solve_modes(vib.model_from_guide(guide))
+    if settings.method == "global":
+        return _identify_global(path, recording, guide, model, settings)
     warnings: list[str] = []
     runs = []
     all_modes: list[IdentifiedMode] = []
@@ -877,6 +922,49 @@ def identify(path, guide=None, settings: IdentifySettings | None = None) -> Iden
                           tuple(extras), tuple(missing), tuple(failed_rows))
 
 
+
+
+def _identify_global(path, recording, guide, model, settings) -> Identification:
+    """:func:`identify` with one modal model of all runs (:func:`guidefit.modal_stage.identify_frfs`)."""
+    from dataclasses import replace
+
+    from guidefit import modal_stage
+
+    warnings: list[str] = []
+    failed_rows: list[dict] = []
+    collected = list(run_frfs(recording, settings, warnings, failed_rows))
+    if not collected:
+        raise IdentificationError(f"{path}: no run gave an FRF ({'; '.join(warnings) or 'no hits'})")
+    frf_by_run = {run.name: frf for run, frf, _ in collected}
+    geometry = {run.name: modal_stage.geometry_of(run, frf) for run, frf, _ in collected}
+    try:
+        res = modal_stage.identify_frfs(frf_by_run, geometry, guide, settings, warnings, model=model)
+    except IdentificationError as exc:
+        warnings.append(str(exc))
+        res = None
+    runs = []
+    for run, frf, rows in collected:
+        views = []
+        if res is not None:
+            for m in res.modes + res.extras:
+                k = m.global_index
+                if run.name in res.fit.runs and res.per_run.get(run.name, [None] * (k + 1))[k] is not None:
+                    views.append(replace(m, run=run.name, fit=res.fit.run_mode(k, run.name),
+                                         shape=m.shapes.get(run.name, m.shape)))
+        levels = _force_levels(run, frf, rows, views, settings, warnings) if settings.force_levels and views else []
+        runs.append(RunResult(run.name, frf, rows, views, tuple(run.excitation_direction),
+                              frf_channels(run, frf), levels))
+    modes = res.modes if res is not None else []
+    joint = {k: next((m for m in modes if m.label == lab), None) for k, lab in JOINT_LABELS.items()}
+    if joint["V"] is None and joint["H"] is None:
+        why = [w for w in warnings if " hit " not in w.split(":", 1)[0]]
+        raise IdentificationError(f"{path}: neither the vertical nor the horizontal joint mode was found"
+                                  + (f" ({'; '.join(why)})" if why else ""))
+    _quality_warnings(modes, settings, warnings)
+    _excitation_warnings(modes, frf_by_run, warnings)
+    params = joint_parameters(guide.mass_kg, joint)
+    return Identification(str(path), guide, tuple(runs), tuple(modes), params, tuple(warnings),
+                          tuple(res.extras), tuple(res.missing), tuple(failed_rows), modal=res)
 
 
 def frf_of_recording(path, settings: IdentifySettings | None = None):
