@@ -72,7 +72,7 @@ STABLE_MAC = 0.9
 CLUSTER_LN_F = 0.004
 CLUSTER_LN_ZETA = 0.25
 #: a cluster is a physical mode when it holds stable poles at this share of the orders (and at least 3)
-MIN_ORDER_SHARE = 0.3
+MIN_ORDER_SHARE = 0.2
 #: ... and its participation is at least this share of the strongest cluster's
 MIN_PARTICIPATION = 5e-3
 MAX_DAMPING = 0.4
@@ -137,31 +137,45 @@ def _mac(a: np.ndarray, b: np.ndarray) -> float:
     return float(abs(np.vdot(a, b)) ** 2 / den) if den > 0 else 0.0
 
 
-def _reduced_matrices(f: np.ndarray, H: np.ndarray, n_max: int, ts: float):
-    """R (n+1, n+1), sum_o T_o and S (O, n+1, n+1) of the LSCF normal equations at the largest order."""
+def _reduced_matrices(f: np.ndarray, H3: np.ndarray, n_max: int, ts: float):
+    """R (n+1, n+1), M-parts of the poly-reference LSCF normal equations at the largest order.
+
+    ``H3`` is ``(F, O, m)``: O outputs, m references. Columns of ``S`` and
+    ``T`` are ordered (order j, reference i) -> ``j m + i``.
+    """
+    F, O, m = H3.shape
     X = np.exp(1j * 2 * np.pi * f[:, None] * ts * np.arange(n_max + 1)[None, :])  # (F, n+1)
     R = np.real(X.conj().T @ X)
-    XH = X.conj()[:, None, :] * H[:, :, None]  # (F, O, n+1): conj(X) H_o
-    S = -np.real(np.einsum("foi,fj->oij", XH, X))
-    T = np.real((X.conj().T * np.sum(np.abs(H) ** 2, axis=1)[None, :]) @ X)
+    Y = (X[:, None, :, None] * H3[:, :, None, :]).reshape(F, O, (n_max + 1) * m)  # z^j H_oi
+    S = np.real(np.einsum("fk,foc->okc", X.conj(), Y))  # (O, n+1, (n+1) m)
+    T = np.real(np.einsum("foc,fod->cd", Y.conj(), Y))  # summed over outputs
     return R, S, T
 
 
-def _lscf_poles(R, S, T, n: int, ts: float) -> np.ndarray:
-    """Poles (rad/s) of the common denominator of order n (a_n = 1)."""
+def _lscf_poles(R, S, T, n: int, m: int, ts: float) -> np.ndarray:
+    """Poles (rad/s) of the right matrix-fraction denominator of order n (highest coefficient I_m)."""
     import scipy.linalg
 
     k = n + 1
-    Rn, Sn, Tn = R[:k, :k], S[:, :k, :k], T[:k, :k]
+    c = k * m
+    Rn, Sn, Tn = R[:k, :k], S[:, :k, :c], T[:c, :c]
     RinvS = scipy.linalg.solve(Rn, Sn.transpose(1, 0, 2).reshape(k, -1), assume_a="pos")
-    RinvS = RinvS.reshape(k, S.shape[0], k).transpose(1, 0, 2)
+    RinvS = RinvS.reshape(k, S.shape[0], c).transpose(1, 0, 2)
     M = Tn - np.einsum("oji,ojk->ik", Sn, RinvS)
+    low = n * m
     try:
-        a = np.linalg.solve(M[:n, :n], -M[:n, n])
+        alpha = np.linalg.solve(M[:low, :low], -M[:low, low:])  # (n m, m): alpha_0 .. alpha_{n-1}
     except np.linalg.LinAlgError:
-        a = np.linalg.lstsq(M[:n, :n], -M[:n, n], rcond=None)[0]
-    coef = np.concatenate([a, [1.0]])
-    z = np.roots(coef[::-1])
+        alpha = np.linalg.lstsq(M[:low, :low], -M[:low, low:], rcond=None)[0]
+    if m == 1:
+        z = np.roots(np.concatenate([alpha[:, 0], [1.0]])[::-1])
+    else:
+        # block companion of A(z) v = sum_j z^j alpha_j^T v (rows of alpha_j multiply H's references)
+        C = np.zeros((low, low))
+        if n > 1:
+            C[: low - m, m:] = np.eye(low - m)
+        C[low - m:, :] = -np.concatenate([alpha[j * m:(j + 1) * m].T for j in range(n)], axis=1)
+        z = np.linalg.eigvals(C)
     z = z[np.abs(z) > 0]
     return np.log(z) / ts
 
@@ -179,8 +193,17 @@ def _participation(f: np.ndarray, H: np.ndarray, poles: np.ndarray) -> np.ndarra
     return 2j * poles.imag[:, None] * res
 
 
-def lscf_stabilisation(frequency_hz, H, orders: Sequence[int] = range(4, 49, 2), band_hz=None) -> Stabilisation:
+def lscf_stabilisation(frequency_hz, H, orders: Sequence[int] = range(4, 49, 2), band_hz=None,
+                       references=None) -> Stabilisation:
     """LSCF poles over a range of model orders, with stability flags (the stabilisation diagram).
+
+    With ``references`` (``(F, O_c, m)``: the outputs measured in all of m
+    runs with different hit points), the poles come from the poly-reference
+    (PolyMAX) matrix-fraction model ``H(z) = B(z) A(z)^-1``, A an m x m matrix
+    polynomial of order n (n m poles): two close modes that the references
+    excite differently then separate at low order. Without it, from the
+    common-denominator model of all columns of ``H``. Participation is
+    always fitted to every column of ``H``.
 
     Parameters
     ----------
@@ -205,18 +228,24 @@ def lscf_stabilisation(frequency_hz, H, orders: Sequence[int] = range(4, 49, 2),
     lo, hi = (float(f[0]), float(f[-1])) if band_hz is None else (float(band_hz[0]), float(band_hz[1]))
     sel = (f >= lo) & (f <= hi)
     f, Hf = f[sel], Hf[sel]
+    H3 = Hf[:, :, None] if references is None else np.asarray(references, dtype=complex)[sel]
+    m = H3.shape[2]
     orders = sorted(int(n) for n in orders)
     if f.size < 2 * orders[0] + 4:
         raise IdentificationError(f"LSCF: {f.size} bins in {lo:.0f}-{hi:.0f} Hz; too few for model order {orders[0]}")
-    orders = [n for n in orders if 2 * n + 4 <= f.size] or orders[:1]
+    if m > 1:
+        orders = sorted({max(1, n // m) for n in orders})  # n m poles per order: the same pole counts
+    orders = [n for n in orders if 2 * n * m + 4 <= f.size] or orders[:1]
     rms = np.sqrt(np.mean(np.abs(Hf) ** 2, axis=0))
     Hn = Hf / np.where(rms > 0, rms, 1.0)
+    rms3 = np.sqrt(np.mean(np.abs(H3) ** 2, axis=(0, 2)))
+    H3n = H3 / np.where(rms3 > 0, rms3, 1.0)[None, :, None]
     ts = 1.0 / (2.0 * hi * 1.05)
-    R, S, T = _reduced_matrices(f, Hn, orders[-1], ts)
+    R, S, T = _reduced_matrices(f, H3n, orders[-1], ts)
     rows = []
     prev = None
     for n in orders:
-        p = _lscf_poles(R, S, T, n, ts)
+        p = _lscf_poles(R, S, T, n, m, ts)
         wn = np.abs(p)
         zeta = -p.real / np.where(wn > 0, wn, 1.0)
         fn = wn / (2 * np.pi)
@@ -234,7 +263,7 @@ def lscf_stabilisation(frequency_hz, H, orders: Sequence[int] = range(4, 49, 2),
                 sz[i] = sf[i] and abs(pz[j] / zeta[i] - 1) < STABLE_DAMPING
                 sv[i] = sf[i] and _mac(part[i], pv[j]) >= STABLE_MAC
         prev = (fn, zeta, part)
-        rows.append((np.full(p.size, n), fn, zeta, part, sf, sz, sv))
+        rows.append((np.full(p.size, n * m), fn, zeta, part, sf, sz, sv))
     cat = [np.concatenate([r[k] for r in rows]) for k in range(7)]
     return Stabilisation(cat[0], cat[1], cat[2], cat[3], cat[4], cat[5], cat[6], (lo, hi))
 
@@ -594,6 +623,34 @@ def _rss(*values) -> float | None:
     return math.sqrt(sum(v * v for v in vals)) if vals else None
 
 
+#: two runs whose FRFs at the common channels correlate this much have the same hit (one reference)
+SAME_REFERENCE = 0.98
+
+
+def _references(frfs: list, sel: np.ndarray):
+    """``(F, O_c, m)`` FRFs of the channels every run measured, one reference per distinct hit, or None
+    (one run, no common channel or one distinct hit: the common-denominator LSCF is used)."""
+    common = [c for c in frfs[0].channels if all(c in x.channels for x in frfs[1:])]
+    if len(frfs) < 2 or not common:
+        return None
+    cols = []
+    for x in frfs:
+        h = np.asarray(x.H)[sel][:, [list(x.channels).index(c) for c in common]]
+        v = h.ravel()
+        same = False
+        for other in cols:
+            w = other.ravel()
+            den = float(np.real(np.vdot(v, v) * np.vdot(w, w)))
+            if den > 0 and abs(np.vdot(v, w)) ** 2 / den > SAME_REFERENCE:
+                same = True
+                break
+        if not same:
+            cols.append(h)
+    if len(cols) < 2:
+        return None
+    return np.stack(cols, axis=2)
+
+
 def global_fit(frf_by_run: dict, band_hz: tuple, *, orders: Sequence[int] = range(4, 49, 2),
                jackknife: bool = True, selection_spread: bool = True) -> GlobalFit:
     """Identify the modes of all runs together: LSCF diagram, pole selection, global refinement.
@@ -642,7 +699,7 @@ def global_fit(frf_by_run: dict, band_hz: tuple, *, orders: Sequence[int] = rang
         columns += [(name, ch) for ch in x.channels]
         runs[name] = slice(start, start + len(x.channels))
         start += len(x.channels)
-    diagram = lscf_stabilisation(f, H, orders)
+    diagram = lscf_stabilisation(f, H, orders, references=_references(frfs, sel_bins))
     selection = select_poles(diagram)
     if not selection.chosen:
         raise IdentificationError(f"global fit: no stable pole between {band[0]:.0f} and {band[1]:.0f} Hz")

@@ -132,6 +132,7 @@ class IdentifiedMode:
     shapes: dict = field(default_factory=dict)  # run -> channel -> modal constant (global fit: every run)
     std_parts: dict = field(default_factory=dict)  # fit / jackknife / selection std of f and zeta
     global_index: int | None = field(default=None, compare=False)  # index into the GlobalFit's modes
+    carriage_energy: float | None = None  # share of the mode's kinetic energy in the carriage (q^T M q)
 
     def to_dict(self) -> dict:
         """JSON-ready; the contract's label/frequency_hz/damping_ratio plus extras."""
@@ -155,6 +156,7 @@ class IdentifiedMode:
             "shapes": {r: dict(v) for r, v in self.shapes.items()},
             "std_parts": {k: dict(v) for k, v in self.std_parts.items()},
             "motion": [float(v) for v in self.motion],
+            "carriage_energy_share": self.carriage_energy,
             "energy": dict(self.energy),
         }
 

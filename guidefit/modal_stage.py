@@ -101,7 +101,47 @@ def global_band(model, frf_by_run: dict, geometry: dict, settings) -> tuple[floa
             low = np.flatnonzero((f > f_lo) & (sff < peak * 10 ** (-FORCE_RANGE_DB / 10)))
             if peak > 0 and low.size:
                 f_hi = min(f_hi, max(float(f[low[0]]), 1.2 * f_lo))
+    f_lo, f_hi = _widen_to_peaks(frf_by_run, f_lo, f_hi, settings)
     return f_lo, f_hi
+
+
+#: prominence (dB) of a mode-indicator peak outside the model's range that widens the band to hold it
+PEAK_PROMINENCE_DB = 6.0
+
+
+def _widen_to_peaks(frf_by_run: dict, f_lo: float, f_hi: float, settings) -> tuple[float, float]:
+    """Widen the band to hold the data's own resonances next to it (a base mode just above the carriage
+    modes, a soft rig's lateral mode below them): up to half ``f_lo`` and twice ``f_hi``, never past
+    where the data end (0.8 x the last bin, the force-spectrum limit already in ``f_hi`` is kept as cap
+    only when it came from the force)."""
+    from guidefit import modes as modes_mod
+
+    lo_cap, hi_cap = 0.5 * f_lo, 2.0 * f_hi
+    for frf in frf_by_run.values():
+        f = np.asarray(frf.frequency_hz)
+        hi_cap = min(hi_cap, 0.8 * float(f[-1]))
+        sff = (getattr(frf, "group_sums", None) or {}).get("Sff")
+        if sff is not None:
+            sff = np.sum(np.asarray(sff, dtype=float), axis=0)
+            peak = float(np.max(sff[f > 0], initial=0.0))
+            low = np.flatnonzero((f > f_hi) & (sff < peak * 10 ** (-FORCE_RANGE_DB / 10)))
+            if low.size:
+                hi_cap = min(hi_cap, float(f[low[0]]))
+    new_lo, new_hi = f_lo, f_hi
+    for frf in frf_by_run.values():
+        if settings.f_min_hz is not None and settings.f_max_hz is not None:
+            break
+        try:
+            pk = modes_mod.find_peaks(frf.frequency_hz, frf.H, f_min=lo_cap, f_max=max(hi_cap, lo_cap * 1.01),
+                                      min_prominence_db=PEAK_PROMINENCE_DB, min_snr_db=20.0)
+        except (ValueError, IdentificationError):
+            continue
+        for fp in pk.frequency_hz:
+            if settings.f_max_hz is None and f_hi < fp <= hi_cap / 1.15:
+                new_hi = max(new_hi, 1.15 * float(fp))
+            if settings.f_min_hz is None and lo_cap / 0.75 <= fp < f_lo:
+                new_lo = min(new_lo, 0.75 * float(fp))
+    return new_lo, min(new_hi, hi_cap) if new_hi > f_hi else f_hi
 
 
 def assemble_motion(constants: dict, sensors: dict, drive: dict | None = None, iterations: int = 20):
@@ -191,6 +231,60 @@ def _ambiguity(energy: dict, observed: np.ndarray, label: str, model_labels) -> 
     return None
 
 
+#: a second mode of the same motion with this share of the first's carriage energy: which one is the
+#: carriage mode is ambiguous
+SAME_GROUP_RATIO = 0.8
+
+
+def label_by_carriage_energy(candidates: list[dict], model) -> tuple[list[str], dict]:
+    """Labels from the assembled motion when it is mass-normalised (every run's hit point known).
+
+    Each mode's dominant energy group (v, theta, psi, u-phi) says which
+    carriage motion it is; among several modes of one group the carriage mode
+    is the one whose kinetic energy lies most in the carriage
+    (``carriage_energy`` = q^T M q of the mass-normalised motion; a base or
+    rail mode moves the carriage with little of its energy). u-phi modes: the
+    two with most carriage energy are the roll pair, the lower one roll_low
+    (one alone: roll_low when lateral translation dominates it). Returns the labels and, for modes whose label the data do not
+    decide (a second mode of the same group within :data:`SAME_GROUP_RATIO`),
+    ``{index: [(label, share), ...]}``. The model's frequencies are not used.
+    """
+    labels = ["extra"] * len(candidates)
+    ambiguous: dict[int, list] = {}
+    groups: dict[str, list[int]] = {}
+    for i, c in enumerate(candidates):
+        groups.setdefault(max(c["energy"], key=c["energy"].get), []).append(i)
+
+    def share(i):
+        return candidates[i]["carriage_energy"]
+
+    def name(i):
+        return f"at {candidates[i]['frequency_hz']:.0f} Hz"
+
+    for g, label in (("v", "vertical"), ("theta", "pitch"), ("psi", "yaw")):
+        members = sorted(groups.get(g, []), key=lambda i: -share(i))
+        if not members or label not in model.labels:
+            continue
+        labels[members[0]] = label
+        if len(members) > 1 and share(members[1]) >= SAME_GROUP_RATIO * share(members[0]):
+            pair = [(f"{label} {name(i)}", float(share(i))) for i in members[:2]]
+            ambiguous[members[0]] = ambiguous[members[1]] = pair
+    # u-phi: the two modes with most carriage energy are the roll pair (lower: roll_low); one alone is
+    # roll_low when lateral translation dominates it, else roll_high
+    members = sorted(groups.get("u_phi", []), key=lambda i: -share(i))
+    if len(members) == 1:
+        c = candidates[members[0]]
+        labels[members[0]] = "roll_low" if c["u_energy"] >= c["phi_energy"] else "roll_high"
+    elif members:
+        pair = sorted(members[:2], key=lambda i: candidates[i]["frequency_hz"])
+        labels[pair[0]], labels[pair[1]] = "roll_low", "roll_high"
+        if len(members) > 2 and share(members[2]) >= SAME_GROUP_RATIO * share(members[1]):
+            text = [(f"roll {name(i)}", float(share(i))) for i in members[1:3]]
+            ambiguous[members[1]] = ambiguous[members[2]] = text
+    labels = [lab if lab in model.labels or lab == "extra" else "extra" for lab in labels]
+    return labels, ambiguous
+
+
 def identify_frfs(frf_by_run: dict, geometry: dict, guide, settings=None, warnings: list | None = None,
                   model=None) -> ModalResult:
     """Fit -> shapes -> labels of the modes of all runs together (the modal stage of identify).
@@ -259,7 +353,8 @@ def _candidate(gf, k, sensors, drive, mass) -> dict:
     contrib = np.abs(qn * (mass @ qn))
     amps = {r: float(np.linalg.norm(c)) for r, c in constants.items()}
     primary = max(amps, key=amps.get)
-    return {"k": k, "mode": m, "frequency_hz": m.frequency_hz, "damping_ratio": m.damping_ratio, "q": qn,
+    carriage = float(q @ mass @ q) if all(d is not None for d in drive.values()) else None
+    return {"k": k, "mode": m, "carriage_energy": carriage, "frequency_hz": m.frequency_hz, "damping_ratio": m.damping_ratio, "q": qn,
             "q_raw": q, "energy": energy_shares(qn, mass), "u_energy": contrib[0], "phi_energy": contrib[4],
             "shape": mc, "constants": constants, "primary": primary, "observed": observed, "scale": scale}
 
@@ -267,11 +362,16 @@ def _candidate(gf, k, sensors, drive, mass) -> dict:
 def _labelled(gf, candidates, per_run, frf_by_run, geometry, model, warnings, band) -> ModalResult:
     from guidefit import identify as ident
 
-    labels = ident.label_modes(candidates, model) if candidates else []
+    by_share: dict = {}
+    if candidates and all(c["carriage_energy"] is not None for c in candidates):
+        labels, by_share = label_by_carriage_energy(candidates, model)
+    else:
+        labels = ident.label_modes(candidates, model) if candidates else []
     modes, extras = [], []
-    for c, label in zip(candidates, labels):
+    for i, (c, label) in enumerate(zip(candidates, labels)):
         k, m, run = c["k"], c["mode"], c["primary"]
-        amb = _ambiguity(c["energy"], c["observed"], label, model.labels) if label != "extra" else None
+        amb = by_share.get(i) or (_ambiguity(c["energy"], c["observed"], label, model.labels)
+                                  if label != "extra" else None)
         frf = frf_by_run[run]
         view = gf.run_mode(k, run)
         names = [ch.name for ch in geometry[run].channels]
@@ -294,7 +394,7 @@ def _labelled(gf, candidates, per_run, frf_by_run, geometry, model, warnings, ba
             shapes={r: dict(zip([ch.name for ch in geometry[r].channels], (float(v) for v in c["constants"][r])))
                     for r in gf.runs},
             std_parts={kk: {"frequency_hz": _finite(a), "damping_ratio": _finite(b)} for kk, (a, b) in parts.items()},
-            global_index=k,
+            global_index=k, carriage_energy=c["carriage_energy"],
         )
         if amb:
             text = " or ".join(f"{lab} ({share:.0%})" if math.isfinite(share) else f"{lab} (unobserved)"
