@@ -162,6 +162,8 @@ def _lscf_poles(R, S, T, n: int, m: int, ts: float) -> np.ndarray:
     RinvS = scipy.linalg.solve(Rn, Sn.transpose(1, 0, 2).reshape(k, -1), assume_a="pos")
     RinvS = RinvS.reshape(k, S.shape[0], c).transpose(1, 0, 2)
     M = Tn - np.einsum("oji,ojk->ik", Sn, RinvS)
+    if not np.all(np.isfinite(M)):
+        return np.zeros(0, complex)
     low = n * m
     try:
         alpha = np.linalg.solve(M[:low, :low], -M[:low, low:])  # (n m, m): alpha_0 .. alpha_{n-1}
@@ -176,7 +178,7 @@ def _lscf_poles(R, S, T, n: int, m: int, ts: float) -> np.ndarray:
             C[: low - m, m:] = np.eye(low - m)
         C[low - m:, :] = -np.concatenate([alpha[j * m:(j + 1) * m].T for j in range(n)], axis=1)
         z = np.linalg.eigvals(C)
-    z = z[np.abs(z) > 0]
+    z = z[np.isfinite(z) & (np.abs(z) > 0)]
     return np.log(z) / ts
 
 

@@ -6,9 +6,11 @@ the labelled modes of one modal model with shared poles
 (:func:`guidefit.globalfit.global_fit`):
 
 1. **Band.** From the model's range (0.35 x its lowest to 1.3 x its highest
-   carriage mode) and from the data: never above 0.4 x the sample rate, and
-   only where the hammer's force spectrum is within :data:`FORCE_RANGE_DB` of
-   its peak (above that the FRF is noise).
+   carriage mode), never above 0.4 x the sample rate, widened to hold the
+   data's own resonances next to it (:func:`global_band`: a base mode just
+   above the carriage modes, a soft rig's lateral mode below them). The
+   hammer's force spectrum does not cut the band (a soft tip's notches are
+   warned about per mode instead).
 2. **Global fit** of all runs and channels (LSCF stabilisation diagram,
    automatic pole selection, variable-projection refinement, jackknife and
    selection spread in the std).
@@ -49,8 +51,6 @@ import numpy as np
 
 from guidefit.errors import IdentificationError
 
-#: the band stops where the force spectrum has fallen this far below its peak
-FORCE_RANGE_DB = 30.0
 #: second energy group within this share of the first: the label is ambiguous
 AMBIGUOUS_RATIO = 0.8
 
@@ -94,13 +94,6 @@ def global_band(model, frf_by_run: dict, geometry: dict, settings) -> tuple[floa
         fs = geometry[name].sample_rate_hz if name in geometry else None
         f = np.asarray(frf.frequency_hz)
         f_hi = min(f_hi, 0.4 * fs if fs else 0.8 * float(f[-1]))
-        sff = (getattr(frf, "group_sums", None) or {}).get("Sff")
-        if sff is not None and settings.f_max_hz is None:
-            sff = np.sum(np.asarray(sff, dtype=float), axis=0)
-            peak = float(np.max(sff[f > 0], initial=0.0))
-            low = np.flatnonzero((f > f_lo) & (sff < peak * 10 ** (-FORCE_RANGE_DB / 10)))
-            if peak > 0 and low.size:
-                f_hi = min(f_hi, max(float(f[low[0]]), 1.2 * f_lo))
     f_lo, f_hi = _widen_to_peaks(frf_by_run, f_lo, f_hi, settings)
     return f_lo, f_hi
 
@@ -112,21 +105,13 @@ PEAK_PROMINENCE_DB = 6.0
 def _widen_to_peaks(frf_by_run: dict, f_lo: float, f_hi: float, settings) -> tuple[float, float]:
     """Widen the band to hold the data's own resonances next to it (a base mode just above the carriage
     modes, a soft rig's lateral mode below them): up to half ``f_lo`` and twice ``f_hi``, never past
-    where the data end (0.8 x the last bin, the force-spectrum limit already in ``f_hi`` is kept as cap
-    only when it came from the force)."""
+    0.8 x the last bin."""
     from guidefit import modes as modes_mod
 
     lo_cap, hi_cap = 0.5 * f_lo, 2.0 * f_hi
     for frf in frf_by_run.values():
         f = np.asarray(frf.frequency_hz)
         hi_cap = min(hi_cap, 0.8 * float(f[-1]))
-        sff = (getattr(frf, "group_sums", None) or {}).get("Sff")
-        if sff is not None:
-            sff = np.sum(np.asarray(sff, dtype=float), axis=0)
-            peak = float(np.max(sff[f > 0], initial=0.0))
-            low = np.flatnonzero((f > f_hi) & (sff < peak * 10 ** (-FORCE_RANGE_DB / 10)))
-            if low.size:
-                hi_cap = min(hi_cap, float(f[low[0]]))
     new_lo, new_hi = f_lo, f_hi
     for frf in frf_by_run.values():
         if settings.f_min_hz is not None and settings.f_max_hz is not None:
@@ -319,9 +304,7 @@ def identify_frfs(frf_by_run: dict, geometry: dict, guide, settings=None, warnin
     spec = vib.model_from_guide(guide)
     model = model or vib.solve_modes(spec)
     band = global_band(model, frf_by_run, geometry, settings)
-    if not band[1] > band[0] * 1.05:
-        raise IdentificationError(f"the band for the modes ({band[0]:.0f}-{band[1]:.0f} Hz) is empty: sample rate "
-                                  "too low or the hammer's force spectrum too narrow")
+    _check_band(band, frf_by_run, geometry)
     gf = globalfit.global_fit(frf_by_run, band, jackknife=settings.jackknife)
     for name in gf.excluded_runs:
         warnings.append(f"run '{name}': its FRFs are on another frequency grid; left out of the global fit")
@@ -413,6 +396,27 @@ def _labelled(gf, candidates, per_run, frf_by_run, geometry, model, warnings, ba
         warnings.append(f"model mode '{lab}' ({model.frequency_hz(lab):.0f} Hz) not observed in any run")
     return ModalResult(sorted(modes, key=lambda m: m.frequency_hz), sorted(extras, key=lambda m: m.frequency_hz),
                        missing, gf, per_run, band)
+
+
+#: fewer FRF bins than this in the band: no mode fit is attempted
+MIN_BINS_IN_BAND = 16
+
+
+def _check_band(band, frf_by_run: dict, geometry: dict) -> None:
+    """One clear line when the band cannot hold a fit: sample rate too low or records too short."""
+    rates = [g.sample_rate_hz for g in geometry.values() if g.sample_rate_hz]
+    if not band[1] > band[0] * 1.05:
+        need = f" (needs at least {band[0] / 0.4:.0f} Hz)" if rates else ""
+        raise IdentificationError(f"sample rate {min(rates, default=float('nan')):g} Hz too low or the hammer's force "
+                                  f"spectrum too narrow for the modes searched from {band[0]:.0f} Hz{need}")
+    frf = max(frf_by_run.values(), key=lambda x: np.count_nonzero((x.frequency_hz >= band[0])
+                                                                  & (x.frequency_hz <= band[1])))
+    freq = np.asarray(frf.frequency_hz)
+    if np.count_nonzero((freq >= band[0]) & (freq <= band[1])) < MIN_BINS_IN_BAND:
+        n = 2 * (len(freq) - 1)
+        raise IdentificationError(f"records of about {n} samples give {freq[-1] / max(len(freq) - 1, 1):.0f} Hz "
+                                  f"resolution, too coarse for the modes between {band[0]:.0f} and {band[1]:.0f} Hz "
+                                  f"(fewer than {MIN_BINS_IN_BAND} bins); longer records are needed")
 
 
 def _finite(v):
