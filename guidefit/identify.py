@@ -149,7 +149,7 @@ class IdentifiedMode:
             "damping_ratio_before_window_correction": self.raw_damping_ratio,
             "half_power": self.half_power,
             "shape": {k: float(np.real(v)) for k, v in self.shape.items()},
-            "level": "all",
+            "level": None,  # the all-hits estimate (force bins: force_levels, level 0, 1, ...)
             "estimates": [dict(e) for e in self.estimates],
             "candidates": [{"label": lab, "energy_share": share if math.isfinite(share) else None}
                            for lab, share in self.candidates],
@@ -215,25 +215,12 @@ class Identification:
         }
 
     def run_modes(self) -> list[dict]:
-        """Every run's and every force level's own f and zeta of each mode (nothing dropped).
+        """Every run's own all-hits f and zeta of each mode (``level`` None: all hits; nothing dropped).
 
-        ``level`` is ``"all"`` for a run's all-hits estimate, else the force
-        bin's index (0 = softest hits) with its mean peak force.
+        The force bins within a run are the ``force_levels`` entries (each
+        with its ``level`` index, 0 = softest hits, frequency and damping).
         """
-        out = []
-        for m in list(self.modes) + list(self.extra_modes):
-            for e in m.estimates:
-                out.append({"label": m.label, **e})
-        for run in self.runs:
-            bins: dict = {}
-            for lvl in run.force_levels:
-                k = bins.setdefault(lvl["label"], 0)
-                bins[lvl["label"]] = k + 1
-                out.append({"label": lvl["label"], "run": lvl["run"], "level": k,
-                            "peak_force_n": lvl["peak_force_n"], "frequency_hz": lvl["frequency_hz"],
-                            "frequency_std_hz": lvl["frequency_std_hz"],
-                            "damping_ratio": lvl.get("damping_ratio"), "damping_std": lvl.get("damping_std")})
-        return out
+        return [{"label": m.label, **e} for m in list(self.modes) + list(self.extra_modes) for e in m.estimates]
 
     def _sensor_channels(self):
         seen = {}
@@ -670,7 +657,7 @@ def _force_levels(run, frf, rows, modes, settings, warnings: list) -> list[dict]
         if frf.exp_window_tau_s else frf_mod.WindowSettings(none=True)
     names = [ch.name for ch in frf_channels(run, frf)]
     levels = []
-    for members in np.array_split(np.argsort(forces), settings.force_bins):
+    for level_index, members in enumerate(np.array_split(np.argsort(forces), settings.force_bins)):
         wanted = {accepted[i]["hit"] for i in members}
         hits = (h for h in iter_hits(run, settings.hits or HitSettings()) if h.index in wanted)
         try:
@@ -689,7 +676,8 @@ def _force_levels(run, frf, rows, modes, settings, warnings: list) -> list[dict]
             refits.update({id(m): _refit_in_band(sub, m.fit, kept) for m in fitted if id(m.fit) not in failed})
         for m in fitted:
             r, band = refits[id(m)]
-            level = {"run": run.name, "label": m.label, "peak_force_n": float(np.mean(forces[members])),
+            level = {"run": run.name, "label": m.label, "level": level_index,
+                     "peak_force_n": float(np.mean(forces[members])),
                      "n_hits": int(len(members)), "hit_forces_n": [float(x) for x in np.sort(forces[members])],
                      "frequency_hz": None, "frequency_std_hz": None, "band_hz": [float(x) for x in band],
                      "hit_position_m": None if run.excitation_position_m is None

@@ -358,7 +358,7 @@ def _labelled(gf, candidates, per_run, frf_by_run, geometry, model, warnings, ba
         frf = frf_by_run[run]
         view = gf.run_mode(k, run)
         names = [ch.name for ch in geometry[run].channels]
-        estimates = [{"run": r, "level": "all", "frequency_hz": float(e.frequency_hz),
+        estimates = [{"run": r, "level": None, "frequency_hz": float(e.frequency_hz),
                       "damping_ratio": float(e.damping_ratio), "frequency_std_hz": _finite(e.frequency_std_hz),
                       "damping_std": _finite(e.damping_std)}
                      for r, row in per_run.items() if (e := row[k]) is not None]
