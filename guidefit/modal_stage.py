@@ -194,25 +194,28 @@ def _driven_motion(q0, constants, sensors, drive, runs):
     if den <= 0 or float(y @ b) <= 0:
         return q0
     start = q0 * math.sqrt(float(y @ b) / den)
-    res = scipy.optimize.least_squares(resid, start, method="lm", xtol=1e-12, ftol=1e-12)
+    method = "lm" if sum(np.size(constants[r]) for r in runs) >= q0.size else "trf"
+    res = scipy.optimize.least_squares(resid, start, method=method, xtol=1e-12, ftol=1e-12)
     return res.x if np.sum(res.fun**2) <= np.sum(resid(start) ** 2) else start
 
 
-def _ambiguity(energy: dict, observed: np.ndarray, label: str, model_labels) -> list | None:
-    """Candidates [(label, share), (label, share)] when the label is not decided by the data, else None."""
+def _ambiguity(energy: dict, observed: np.ndarray, label: str, model_labels) -> tuple[list, str] | None:
+    """(candidates [(label, share), ...], reason) when the label is not decided by the data, else None."""
     groups = sorted(energy.items(), key=lambda kv: -kv[1])
     (g1, e1), (g2, e2) = groups[0], groups[1]
     name = {"v": "vertical", "theta": "pitch", "psi": "yaw", "u_phi": "roll"}
     if e2 >= AMBIGUOUS_RATIO * e1:
-        return [(name[g1], float(e1)), (name[g2], float(e2))]
+        return [(name[g1], float(e1)), (name[g2], float(e2))], "two motions carry nearly equal kinetic energy"
     if g1 == "u_phi" and not (observed[0] and observed[4]):
-        # lateral translation or roll not seen: roll_low and roll_high cannot be told apart
         other = "roll_high" if label == "roll_low" else "roll_low"
-        return [(label, float(e1)), (other, float(e1))]
+        missing = "lateral translation u" if not observed[0] else "roll phi"
+        return ([(label, float(e1)), (other, float(e1))],
+                f"{missing} is not observed by the sensors of the runs that excite it (u-phi energy share given)")
     unobserved = [dof for dof, seen in zip(("u", "v", "theta", "psi", "phi"), observed) if not seen]
     if unobserved and e1 < 0.9:
-        missing = {"u": "roll_low", "v": "vertical", "theta": "pitch", "psi": "yaw", "phi": "roll_high"}
-        return [(label, float(e1))] + [(missing[d], float("nan")) for d in unobserved[:1]]
+        alt = {"u": "roll_low", "v": "vertical", "theta": "pitch", "psi": "yaw", "phi": "roll_high"}[unobserved[0]]
+        return ([(label, float(e1)), (alt, float("nan"))],
+                f"{unobserved[0]} is not observed and the observed motion is mixed")
     return None
 
 
@@ -353,8 +356,9 @@ def _labelled(gf, candidates, per_run, frf_by_run, geometry, model, warnings, ba
     modes, extras = [], []
     for i, (c, label) in enumerate(zip(candidates, labels)):
         k, m, run = c["k"], c["mode"], c["primary"]
-        amb = by_share.get(i) or (_ambiguity(c["energy"], c["observed"], label, model.labels)
-                                  if label != "extra" else None)
+        amb, why = by_share.get(i), "a second mode of the same motion has nearly as much carriage energy"
+        if amb is None and label != "extra":
+            amb, why = _ambiguity(c["energy"], c["observed"], label, model.labels) or (None, "")
         frf = frf_by_run[run]
         view = gf.run_mode(k, run)
         names = [ch.name for ch in geometry[run].channels]
@@ -382,7 +386,8 @@ def _labelled(gf, candidates, per_run, frf_by_run, geometry, model, warnings, ba
         if amb:
             text = " or ".join(f"{lab} ({share:.0%})" if math.isfinite(share) else f"{lab} (unobserved)"
                                for lab, share in amb)
-            warnings.append(f"mode at {m.frequency_hz:.1f} Hz: label ambiguous: {text}; not used for joint parameters")
+            warnings.append(f"mode at {m.frequency_hz:.1f} Hz: label ambiguous: {text} ({why}); "
+                            "not used for joint parameters")
             extras.append(entry)
         elif label == "extra":
             warnings.append(f"mode at {m.frequency_hz:.1f} Hz (strongest in run '{run}'): the model does not "
