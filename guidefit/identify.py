@@ -1,12 +1,17 @@
 r"""From a hammer recording to K_V, K_H, c_V, c_H (the paper's Eq. 24-29).
 
-Pipeline per run: hits (:mod:`guidefit.hits`) -> averaged FRFs of every
-response channel (:mod:`guidefit.frf`) -> modes by a multi-channel curve fit
-(:mod:`guidefit.modes`) -> damping corrected for the exponential window ->
-each mode's motion at the sensors fitted as a rigid-body motion of the
-carriage and labelled by the motion that carries most of its kinetic energy
-(vertical v, pitch theta, yaw psi, roll u-phi). Across runs, each label keeps
-the estimate with the smallest frequency uncertainty.
+Pipeline: per run, hits (:mod:`guidefit.hits`) -> averaged FRFs of every
+response channel (:mod:`guidefit.frf`); then one modal model of all runs
+(:func:`guidefit.modal_stage.identify_frfs`: poly-reference LSCF
+stabilisation diagram, pole selection by stability, global
+variable-projection fit with shared poles, :mod:`guidefit.globalfit`) ->
+each mode's modal constants of every run assembled into one rigid-body
+motion of the carriage and labelled by the motion that carries most of its
+kinetic energy (vertical v, pitch theta, yaw psi, roll u-phi); ambiguous
+labels are reported, not assigned. Every run's own estimate is kept
+(``estimates``). ``IdentifySettings(method="per_run")`` runs the previous
+per-run fits (each label keeps the estimate with the smallest frequency
+uncertainty), kept as a diagnostic.
 
 The joint parameters follow the paper's single-DOF reading of the vertical
 and horizontal (``roll_low``) modes, with M the carriage mass of the guide:
@@ -15,10 +20,11 @@ and horizontal (``roll_low``) modes, with M the carriage mass of the guide:
 * Eq. (26), (28): ``xi = (f2 - f1) / (2 f)`` (:func:`guidefit.modes.half_power`)
 * Eq. (27), (29): ``c = 4 pi M f xi`` (:func:`damping_from_frequency`)
 
-``f`` is the undamped natural frequency |p|/2pi of the curve fit and ``xi``
+``f`` is the undamped natural frequency |p|/2pi of the fit and ``xi``
 its viscous damping ratio; the half-power values are reported beside them.
-Uncertainties (one standard deviation) combine the delete-a-group jackknife
-over hits with the fit's own standard error.
+Uncertainties (one standard deviation) combine the fit's own standard error,
+the delete-a-group jackknife over hits and (global fit) the spread over
+pole selection.
 
 Examples
 --------
