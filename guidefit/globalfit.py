@@ -638,6 +638,10 @@ def _rss(*values) -> float | None:
     return math.sqrt(sum(v * v for v in vals)) if vals else None
 
 
+#: bins of the stabilisation diagram (long records are thinned to about this many; the refinement uses all)
+MAX_DIAGRAM_BINS = 800
+
+
 #: two runs whose FRFs at the common channels correlate this much have the same hit (one reference)
 SAME_REFERENCE = 0.98
 
@@ -714,7 +718,10 @@ def global_fit(frf_by_run: dict, band_hz: tuple, *, orders: Sequence[int] = rang
         columns += [(name, ch) for ch in x.channels]
         runs[name] = slice(start, start + len(x.channels))
         start += len(x.channels)
-    diagram = lscf_stabilisation(f, H, orders, references=_references(frfs, sel_bins))
+    # the diagram only seeds the refinement: at most ~MAX_DIAGRAM_BINS bins (long records: every k-th)
+    step = max(1, int(math.ceil(f.size / MAX_DIAGRAM_BINS)))
+    refs = _references(frfs, sel_bins)
+    diagram = lscf_stabilisation(f[::step], H[::step], orders, references=None if refs is None else refs[::step])
     selection = select_poles(diagram)
     if not selection.chosen:
         raise IdentificationError(f"global fit: no stable pole between {band[0]:.0f} and {band[1]:.0f} Hz")
@@ -729,7 +736,8 @@ def global_fit(frf_by_run: dict, band_hz: tuple, *, orders: Sequence[int] = rang
         fit = _refine(prob, band, [(fit.modes[k].frequency_hz, fit.modes[k].damping_ratio) for k in keep]) or fit
     modes = list(fit.modes)
     jk = _jackknife(frfs, band, modes, prob) if jackknife else [(None, None)] * len(modes)
-    sp = _selection_spread(prob, band, modes, selection, diagram) if selection_spread else [(None, None)] * len(modes)
+    thin = _Shared(f[::step], H[::step], groups, shifts) if step > 1 else prob  # a spread, not an estimate
+    sp = _selection_spread(thin, band, modes, selection, diagram) if selection_spread else [(None, None)] * len(modes)
     from dataclasses import replace
 
     parts, out = [], []
@@ -756,7 +764,8 @@ def run_estimates(gf: GlobalFit, frf_by_run: dict, min_share: float = 0.01) -> d
     top = np.max(np.array(list(amps.values())), axis=0) if amps else np.zeros(len(gf.modes))
     for run, sl in gf.runs.items():
         frf = frf_by_run[run]
-        sel = (frf.frequency_hz >= lo) & (frf.frequency_hz <= hi)
+        sel = np.flatnonzero((frf.frequency_hz >= lo) & (frf.frequency_hz <= hi))
+        sel = sel[::max(1, int(math.ceil(sel.size / MAX_DIAGRAM_BINS)))]  # long records: every k-th bin
         tau = getattr(frf, "exp_window_tau_s", None)
         prob = _Shared(frf.frequency_hz[sel], np.asarray(frf.H)[sel], [slice(None)], [1.0 / tau if tau else 0.0])
         fit = _refine(prob, gf.band_hz, [(m.frequency_hz, m.damping_ratio) for m in gf.modes], max_nfev=10, tol=1e-8)
