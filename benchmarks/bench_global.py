@@ -122,7 +122,7 @@ def evaluate(case, seed, args) -> list[dict]:
     rows = []
     truth_modes = {m["label"]: m for m in truth["modes"]}
     for method in args.methods:
-        found, dt, res = guidefit_modes(path, method)
+        found, dt, _ = guidefit_modes(path, method)
         for label in CARRIAGE:
             t = truth_modes.get(label)
             if t is None:
@@ -182,7 +182,7 @@ def main(argv=None) -> int:
         print("|".join(["---"] * len(head)))
     bad = 0
     for r in rows:
-        def g(k, fmt):
+        def g(k, fmt, r=r):
             v = r.get(k)
             return "-" if v is None else format(v, fmt)
         if r["method"] == "global" and "ef" in r:
@@ -191,7 +191,48 @@ def main(argv=None) -> int:
         print(sep.join([r["case"], str(r["seed"]), r["method"], r["label"], g("ef", "+.4f"), g("nf", ".1f"),
                         g("ez", "+.3f"), g("nz", ".1f"), g("time_s", ".2f")]))
     print(f"global: {bad} mode(s) outside the targets (f 0.05 %, zeta 2 %, 3 std)")
+    print()
+    print(summary(rows))
     return 0
+
+
+def summary(rows: list[dict]) -> str:
+    """Markdown: per method and mode the largest and median |error| over cases and seeds, misses, 3-std
+    coverage; per case and method the largest |error| over modes and seeds; median time per file."""
+    import statistics
+
+    methods = [m for m in ("global", "per_run", "sdypy_lscf", "half_power") if any(r["method"] == m for r in rows)]
+    out = ["| method | mode | estimates | not found | max abs f err % | median | max abs zeta err % | median "
+           "| within 3 std (f, zeta) |", "|---|---|---:|---:|---:|---:|---:|---:|---:|"]
+    for m in methods:
+        for label in CARRIAGE:
+            r = [x for x in rows if x["method"] == m and x["label"] == label]
+            if not r:
+                continue
+            got = [x for x in r if x.get("ef") is not None]
+            ef = [abs(x["ef"]) for x in got]
+            ez = [abs(x["ez"]) for x in got]
+            nf = [x["nf"] for x in got if x.get("nf") is not None]
+            nz = [x["nz"] for x in got if x.get("nz") is not None]
+            cov = f"{sum(v <= 3 for v in nf)}/{len(nf)}, {sum(v <= 3 for v in nz)}/{len(nz)}" if nf else "-"
+            out.append(f"| {m} | {label} | {len(r)} | {len(r) - len(got)} | {max(ef, default=float('nan')):.4f} | "
+                       f"{statistics.median(ef) if ef else float('nan'):.4f} | {max(ez, default=float('nan')):.3f} | "
+                       f"{statistics.median(ez) if ez else float('nan'):.3f} | {cov} |")
+    out += ["", "| case | " + " | ".join(f"{m}: max f / zeta err %" for m in methods) + " |",
+            "|---|" + "---:|" * len(methods)]
+    for case in dict.fromkeys(x["case"] for x in rows):
+        cells = []
+        for m in methods:
+            got = [x for x in rows if x["case"] == case and x["method"] == m and x.get("ef") is not None]
+            miss = sum(1 for x in rows if x["case"] == case and x["method"] == m and x.get("ef") is None)
+            cell = (f"{max(abs(x['ef']) for x in got):.3g} / {max(abs(x['ez']) for x in got):.3g}" if got else "-")
+            cells.append(cell + (f" ({miss} not found)" if miss else ""))
+        out.append(f"| {case} | " + " | ".join(cells) + " |")
+    out += ["", "| method | median s per file |", "|---|---:|"]
+    for m in methods:
+        t = [x["time_s"] for x in rows if x["method"] == m and x.get("time_s")]
+        out.append(f"| {m} | {statistics.median(t):.2f} |")
+    return "\n".join(out)
 
 
 if __name__ == "__main__":

@@ -56,7 +56,6 @@ Examples
 from __future__ import annotations
 
 import math
-import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -143,10 +142,10 @@ def _reduced_matrices(f: np.ndarray, H3: np.ndarray, n_max: int, ts: float):
     ``H3`` is ``(F, O, m)``: O outputs, m references. Columns of ``S`` and
     ``T`` are ordered (order j, reference i) -> ``j m + i``.
     """
-    F, O, m = H3.shape
+    F, n_out, m = H3.shape
     X = np.exp(1j * 2 * np.pi * f[:, None] * ts * np.arange(n_max + 1)[None, :])  # (F, n+1)
     R = np.real(X.conj().T @ X)
-    Y = (X[:, None, :, None] * H3[:, :, None, :]).reshape(F, O, (n_max + 1) * m)  # z^j H_oi
+    Y = (X[:, None, :, None] * H3[:, :, None, :]).reshape(F, n_out, (n_max + 1) * m)  # z^j H_oi
     S = np.real(np.einsum("fk,foc->okc", X.conj(), Y))  # (O, n+1, (n+1) m)
     T = np.real(np.einsum("foc,fod->cd", Y.conj(), Y))  # summed over outputs
     return R, S, T
@@ -762,7 +761,7 @@ def run_estimates(gf: GlobalFit, frf_by_run: dict, min_share: float = 0.01) -> d
     amps = {run: np.array([np.linalg.norm(np.asarray(m.modal_constants)[sl]) for m in gf.modes])
             for run, sl in gf.runs.items()}
     top = np.max(np.array(list(amps.values())), axis=0) if amps else np.zeros(len(gf.modes))
-    for run, sl in gf.runs.items():
+    for run in gf.runs:
         frf = frf_by_run[run]
         sel = np.flatnonzero((frf.frequency_hz >= lo) & (frf.frequency_hz <= hi))
         sel = sel[::max(1, int(math.ceil(sel.size / MAX_DIAGRAM_BINS)))]  # long records: every k-th bin
