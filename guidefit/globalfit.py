@@ -146,8 +146,10 @@ def _reduced_matrices(f: np.ndarray, H3: np.ndarray, n_max: int, ts: float):
     X = np.exp(1j * 2 * np.pi * f[:, None] * ts * np.arange(n_max + 1)[None, :])  # (F, n+1)
     R = np.real(X.conj().T @ X)
     Y = (X[:, None, :, None] * H3[:, :, None, :]).reshape(F, n_out, (n_max + 1) * m)  # z^j H_oi
-    S = np.real(np.einsum("fk,foc->okc", X.conj(), Y))  # (O, n+1, (n+1) m)
-    T = np.real(np.einsum("foc,fod->cd", Y.conj(), Y))  # summed over outputs
+    c = (n_max + 1) * m
+    S = np.real(X.conj().T @ Y.reshape(F, n_out * c)).reshape(n_max + 1, n_out, c).transpose(1, 0, 2)
+    Yf = Y.reshape(F * n_out, c)
+    T = np.real(Yf.conj().T @ Yf)  # summed over outputs
     return R, S, T
 
 
@@ -507,6 +509,50 @@ def _solve_shared(prob: _Shared, init, band, *, uncertainty=True, max_nfev=200, 
     return _Fit(modes, resid, math.sqrt(cost / float(np.sum(prob.Y**2))))
 
 
+def _gauss_newton(prob: _Shared, band, init, iterations: int = 4):
+    """A few Gauss-Newton steps (step halved while the cost rises) of the shared-pole problem from
+    ``init``; for refits that start next to the answer (per-run estimates, selection alternatives).
+    Returns a :class:`_Fit` with the fit's standard errors, or None when a pole leaves the band."""
+    from guidefit import modes as modes_mod
+
+    x = np.concatenate([np.log(2 * np.pi * np.array([a for a, _ in init])), np.log([b for _, b in init])])
+    n = len(init)
+
+    def split(v):
+        return np.exp(v[:n]), np.clip(np.exp(v[n:]), 1e-6, 0.69)
+
+    r = prob.residual(*split(x))
+    cost = float(r @ r)
+    for _ in range(iterations):
+        J = prob.jacobian(*split(x))
+        dx = -np.linalg.lstsq(J, r, rcond=None)[0]
+        step = 1.0
+        while step > 1e-3:
+            trial = x + step * dx
+            rt = prob.residual(*split(trial))
+            if float(rt @ rt) <= cost:
+                break
+            step /= 2
+        else:
+            break
+        done = np.max(np.abs(step * dx)) < 1e-10
+        x, r, cost = trial, rt, float(rt @ rt)
+        if done:
+            break
+    wn, z = split(x)
+    B = prob.coefficients(wn, z)
+    J = prob.jacobian(wn, z)
+    dof = J.shape[0] - 2 * n - B.size
+    sd = np.sqrt(np.maximum(np.diag(np.linalg.pinv(J.T @ J)) * cost / max(dof, 1), 0.0))
+    modes = [modes_mod.Mode(float(wn[k] / (2 * np.pi)), float(z[k]), B[2 * k] + 1j * B[2 * k + 1], "global_fit",
+                            float(sd[k] * wn[k] / (2 * np.pi)), float(sd[n + k] * z[k])) for k in range(n)]
+    if any(modes_mod._suspicious(m, *band) for m in modes):
+        return None
+    order = np.argsort([m.frequency_hz for m in modes])
+    return _Fit([modes[k] for k in order], {t: B[2 * n + j].copy() for j, t in enumerate(prob.terms)},
+                math.sqrt(cost / float(np.sum(prob.Y**2))))
+
+
 def _refine(prob: _Shared, band, init, *, uncertainty=True, max_nfev=200, tol=1e-10):
     """Variable-projection fit from ``init`` [(f, zeta)]; modes that leave the band or hit a bound are
     dropped and the rest refitted. None when nothing is left."""
@@ -622,7 +668,10 @@ def _selection_spread(prob: _Shared, band, modes, sel: PoleSelection, diagram: S
     df = np.zeros(len(modes))
     dz = np.zeros(len(modes))
     for init in alternatives:
-        fit = _refine(prob, band, sorted(init), uncertainty=False, max_nfev=60, tol=1e-8)
+        try:
+            fit = _gauss_newton(prob, band, sorted(init), iterations=3)
+        except (ValueError, np.linalg.LinAlgError):
+            fit = None
         if fit is None:
             continue
         for k, j in enumerate(_match(fit.modes, modes)):
@@ -767,7 +816,10 @@ def run_estimates(gf: GlobalFit, frf_by_run: dict, min_share: float = 0.01) -> d
         sel = sel[::max(1, int(math.ceil(sel.size / MAX_DIAGRAM_BINS)))]  # long records: every k-th bin
         tau = getattr(frf, "exp_window_tau_s", None)
         prob = _Shared(frf.frequency_hz[sel], np.asarray(frf.H)[sel], [slice(None)], [1.0 / tau if tau else 0.0])
-        fit = _refine(prob, gf.band_hz, [(m.frequency_hz, m.damping_ratio) for m in gf.modes], max_nfev=10, tol=1e-8)
+        try:
+            fit = _gauss_newton(prob, gf.band_hz, [(m.frequency_hz, m.damping_ratio) for m in gf.modes])
+        except (ValueError, np.linalg.LinAlgError):
+            fit = None
         row = [None] * len(gf.modes)
         if fit is not None:
             for k, j in enumerate(_match(fit.modes, gf.modes)):
