@@ -686,6 +686,52 @@ def _rss(*values) -> float | None:
     return math.sqrt(sum(v * v for v in vals)) if vals else None
 
 
+def _conservative_std(prob: _Shared, modes: list) -> list:
+    """``modes`` with each f and zeta std the larger of its own and that of ``prob`` at the same poles."""
+    from dataclasses import replace
+
+    wn = 2 * np.pi * np.array([m.frequency_hz for m in modes])
+    z = np.array([m.damping_ratio for m in modes])
+    try:
+        J = prob.jacobian(wn, z)
+    except np.linalg.LinAlgError:
+        return modes
+    r = prob.residual(wn, z)
+    n = len(modes)
+    dof = J.shape[0] - 2 * n - (2 * n + len(prob.terms)) * prob.Y.shape[1]
+    if dof <= 0:
+        return modes
+    sd = np.sqrt(np.maximum(np.diag(np.linalg.pinv(J.T @ J)) * float(r @ r) / dof, 0.0))
+    out = []
+    for k, m in enumerate(modes):
+        sf, sz = sd[k] * m.frequency_hz, sd[n + k] * m.damping_ratio
+        out.append(replace(m, frequency_std_hz=max(_nz(m.frequency_std_hz), sf), damping_std=max(_nz(m.damping_std), sz)))
+    return out
+
+
+def _nz(v) -> float:
+    return float(v) if v is not None and math.isfinite(v) else 0.0
+
+
+def _noise_scale(frfs: list, sel: np.ndarray):
+    """Per FRF column 1 / (RMS noise of H in the band) from the coherence, var H = |H|^2 (1 - g^2) / (g^2 n);
+    None (RMS scaling) when a column has no coherence or no noise."""
+    out = []
+    for x in frfs:
+        coh = getattr(x, "coherence", None)
+        n = getattr(x, "n_averages", 0) or 0
+        if coh is None or n < 2:
+            return None
+        g = np.clip(np.asarray(coh)[sel], 1e-6, 1.0)
+        H = np.asarray(x.H)[sel]
+        noise = np.sqrt(np.mean(np.abs(H) ** 2 * (1.0 - g) / (g * n), axis=0))
+        rms = np.sqrt(np.mean(np.abs(H) ** 2, axis=0))
+        if not np.all(noise > 1e-9 * np.maximum(rms, 1e-300)):
+            return None
+        out.append(1.0 / noise)
+    return np.concatenate(out)
+
+
 #: bins of the stabilisation diagram (long records are thinned to about this many; the refinement uses all)
 MAX_DIAGRAM_BINS = 800
 
@@ -719,7 +765,7 @@ def _references(frfs: list, sel: np.ndarray):
 
 
 def global_fit(frf_by_run: dict, band_hz: tuple, *, orders: Sequence[int] = range(4, 49, 2),
-               jackknife: bool = True, selection_spread: bool = True) -> GlobalFit:
+               jackknife: bool = True, selection_spread: bool = True, weighting: str = "noise") -> GlobalFit:
     """Identify the modes of all runs together: LSCF diagram, pole selection, global refinement.
 
     Parameters
@@ -775,7 +821,7 @@ def global_fit(frf_by_run: dict, band_hz: tuple, *, orders: Sequence[int] = rang
         raise IdentificationError(f"global fit: no stable pole between {band[0]:.0f} and {band[1]:.0f} Hz")
     shifts = [1.0 / x.exp_window_tau_s if getattr(x, 'exp_window_tau_s', None) else 0.0 for x in frfs]
     groups = list(runs.values())
-    prob = _Shared(f, H, groups, shifts)
+    prob = _Shared(f, H, groups, shifts, scale=_noise_scale(frfs, sel_bins) if weighting == "noise" else None)
     fit = _refine(prob, band, [(c.frequency_hz, c.damping_ratio) for c in selection.chosen])
     if fit is None:
         raise IdentificationError("global fit: the least-squares refinement of the selected poles failed")
@@ -783,6 +829,11 @@ def global_fit(frf_by_run: dict, band_hz: tuple, *, orders: Sequence[int] = rang
     if len(keep) < len(fit.modes) and keep:
         fit = _refine(prob, band, [(fit.modes[k].frequency_hz, fit.modes[k].damping_ratio) for k in keep]) or fit
     modes = list(fit.modes)
+    if prob.scale is not None and weighting == "noise":
+        # the noise-weighted fit is the efficient estimate; its std assumes the model exact and the noise
+        # known. The same poles' std in the equally weighted problem also carries the misfit of the weak
+        # channels: the larger of the two is reported
+        modes = _conservative_std(_Shared(f, H, groups, shifts), modes)
     jk = _jackknife(frfs, band, modes, prob) if jackknife else [(None, None)] * len(modes)
     thin = _Shared(f[::step], H[::step], groups, shifts) if step > 1 else prob  # a spread, not an estimate
     sp = _selection_spread(thin, band, modes, selection, diagram) if selection_spread else [(None, None)] * len(modes)
