@@ -56,6 +56,15 @@ AMBIGUOUS_RATIO = 0.8
 
 
 @dataclass(frozen=True)
+class _DefaultSettings:
+    """The options :func:`identify_frfs` reads (those of guidefit.identify.IdentifySettings)."""
+
+    f_min_hz: float | None = None
+    f_max_hz: float | None = None
+    jackknife: bool = True
+
+
+@dataclass(frozen=True)
 class RunGeometry:
     """What the modal stage needs to know of a run besides its FRFs."""
 
@@ -290,6 +299,7 @@ def identify_frfs(frf_by_run: dict, geometry: dict, guide, settings=None, warnin
         Channel positions and directions (FRF column order) and the hit of each run.
     guide : guidefit.model.guides.Guide
     settings : guidefit.identify.IdentifySettings, optional
+        Reads ``f_min_hz``, ``f_max_hz`` (band limits, None: from model and data) and ``jackknife``.
     warnings : list, optional
         Problems found are appended (one line each).
 
@@ -305,10 +315,9 @@ def identify_frfs(frf_by_run: dict, geometry: dict, guide, settings=None, warnin
         When no stable mode is found in the band.
     """
     from guidefit import globalfit
-    from guidefit.identify import IdentifySettings
     from guidefit.model import vibration as vib
 
-    settings = settings or IdentifySettings()
+    settings = settings or _DefaultSettings()
     warnings = warnings if warnings is not None else []
     spec = vib.model_from_guide(guide)
     model = model or vib.solve_modes(spec)
@@ -319,7 +328,7 @@ def identify_frfs(frf_by_run: dict, geometry: dict, guide, settings=None, warnin
         warnings.append(f"run '{name}': its FRFs are on another frequency grid; left out of the global fit")
     per_run = globalfit.run_estimates(gf, frf_by_run)
     mass = vib.carriage_mass_matrix(spec)
-    from guidefit.identify import sensor_matrix
+    from guidefit.modeshapes import sensor_matrix
 
     sensors = {r: sensor_matrix(geometry[r].channels) for r in gf.runs}
     drive = {}
@@ -334,7 +343,7 @@ def identify_frfs(frf_by_run: dict, geometry: dict, guide, settings=None, warnin
 
 
 def _candidate(gf, k, sensors, drive, mass) -> dict:
-    from guidefit.identify import energy_shares, real_shape
+    from guidefit.modeshapes import energy_shares, real_shape
 
     m = gf.modes[k]
     mc = real_shape(m.modal_constants)  # one phase for all runs
@@ -352,7 +361,7 @@ def _candidate(gf, k, sensors, drive, mass) -> dict:
 
 
 def _labelled(gf, candidates, per_run, frf_by_run, geometry, model, warnings, band) -> ModalResult:
-    from guidefit import identify as ident
+    from guidefit import modeshapes as ident
 
     by_share: dict = {}
     if candidates and all(c["carriage_energy"] is not None for c in candidates):
