@@ -386,7 +386,7 @@ def _labelled(gf, candidates, per_run, frf_by_run, geometry, model, warnings, ba
             label="ambiguous" if amb else label, run=run, frequency_hz=float(m.frequency_hz),
             damping_ratio=float(m.damping_ratio), frequency_std_hz=_finite(m.frequency_std_hz),
             damping_std=_finite(m.damping_std),
-            model_frequency_hz=model.frequency_hz(label) if label in model.labels else None,
+            model_frequency_hz=model.frequency_hz(label) if (label in model.labels and not amb) else None,
             shape=dict(zip(names, (float(v) for v in c["constants"][run]))),
             motion=tuple(float(v) for v in c["q"]), energy={kk: float(v) for kk, v in c["energy"].items()},
             coherence=ident._coherence_at(frf, view.peak_frequency_hz, view.residues),

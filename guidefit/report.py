@@ -217,14 +217,18 @@ def render_identification(result, console=None) -> None:
     console.print(table)
     from rich import box
 
-    modes = Table(title="modes (f_n, zeta: curve fit; hp: half-power Eq. 26/28, bins in band)",
+    kind = "global fit of all runs" if getattr(result, "modal", None) is not None else "curve fit"
+    modes = Table(title=f"modes (f_n, zeta: {kind}; hp: half-power Eq. 26/28, bins in band)",
                   box=box.SIMPLE_HEAD, pad_edge=False)
     for col in ("label", "run", "f_n (Hz)", "zeta", "model (Hz)", "coh.", "hp zeta"):
         modes.add_column(col, justify="right" if col != "label" else "left")
     for m in list(result.modes) + list(result.extra_modes):
         hp = m.half_power
+        label = m.label
+        if getattr(m, "candidates", ()):
+            label += ": " + "/".join(str(c[0]) for c in m.candidates)
         modes.add_row(
-            m.label, m.run, _pm(m.frequency_hz, m.frequency_std_hz),
+            label, m.run, _pm(m.frequency_hz, m.frequency_std_hz),
             _pm(m.damping_ratio, m.damping_std),
             "-" if m.model_frequency_hz is None else f"{m.model_frequency_hz:.1f}", f"{m.coherence:.3f}",
             "-" if hp is None else f"{hp['zeta_window_corrected']:.4f} ({hp['bins_in_band']})",
