@@ -1,12 +1,17 @@
 r"""From a hammer recording to K_V, K_H, c_V, c_H (the paper's Eq. 24-29).
 
-Pipeline per run: hits (:mod:`guidefit.hits`) -> averaged FRFs of every
-response channel (:mod:`guidefit.frf`) -> modes by a multi-channel curve fit
-(:mod:`guidefit.modes`) -> damping corrected for the exponential window ->
-each mode's motion at the sensors fitted as a rigid-body motion of the
-carriage and labelled by the motion that carries most of its kinetic energy
-(vertical v, pitch theta, yaw psi, roll u-phi). Across runs, each label keeps
-the estimate with the smallest frequency uncertainty.
+Pipeline: per run, hits (:mod:`guidefit.hits`) -> averaged FRFs of every
+response channel (:mod:`guidefit.frf`); then one modal model of all runs
+(:func:`guidefit.modal_stage.identify_frfs`: poly-reference LSCF
+stabilisation diagram, pole selection by stability, global
+variable-projection fit with shared poles, :mod:`guidefit.globalfit`) ->
+each mode's modal constants of every run assembled into one rigid-body
+motion of the carriage and labelled by the motion that carries most of its
+kinetic energy (vertical v, pitch theta, yaw psi, roll u-phi); ambiguous
+labels are reported, not assigned. Every run's own estimate is kept
+(``estimates``). ``IdentifySettings(method="per_run")`` runs the previous
+per-run fits (each label keeps the estimate with the smallest frequency
+uncertainty), kept as a diagnostic.
 
 The joint parameters follow the paper's single-DOF reading of the vertical
 and horizontal (``roll_low``) modes, with M the carriage mass of the guide:
@@ -15,10 +20,11 @@ and horizontal (``roll_low``) modes, with M the carriage mass of the guide:
 * Eq. (26), (28): ``xi = (f2 - f1) / (2 f)`` (:func:`guidefit.modes.half_power`)
 * Eq. (27), (29): ``c = 4 pi M f xi`` (:func:`damping_from_frequency`)
 
-``f`` is the undamped natural frequency |p|/2pi of the curve fit and ``xi``
+``f`` is the undamped natural frequency |p|/2pi of the fit and ``xi``
 its viscous damping ratio; the half-power values are reported beside them.
-Uncertainties (one standard deviation) combine the delete-a-group jackknife
-over hits with the fit's own standard error.
+Uncertainties (one standard deviation) combine the fit's own standard error,
+the delete-a-group jackknife over hits and (global fit) the spread over
+pole selection.
 
 Examples
 --------
@@ -36,6 +42,16 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from guidefit.errors import IdentificationError
+from guidefit.modeshapes import (  # also re-exported: guidefit.identify.IdentifiedMode etc.
+    IdentifiedMode,
+    _coherence_at,
+    _half_power_entry,
+    energy_shares,
+    label_modes,
+    real_shape,
+    rigid_body_motion,
+    sensor_matrix,
+)
 
 JOINT_LABELS = {"V": "vertical", "H": "roll_low"}
 
@@ -102,43 +118,11 @@ class IdentifySettings:
     force_levels: bool = False  # per force-level frequencies (for explain's amplitude_dependence)
     force_bins: int = 3
     min_force_ratio: float = 1.5
+    method: str = "global"  # "global": one modal model of all runs (guidefit.globalfit); "per_run": legacy fits
 
-
-@dataclass(frozen=True)
-class IdentifiedMode:
-    """A measured mode with its label, uncertainty and motion at the sensors."""
-
-    label: str
-    run: str
-    frequency_hz: float
-    damping_ratio: float
-    frequency_std_hz: float | None
-    damping_std: float | None
-    model_frequency_hz: float | None
-    shape: dict  # channel -> modal constant (1/kg), real for normal modes
-    motion: tuple  # rigid-body motion (u, v, theta, psi, phi), unit norm
-    energy: dict  # kinetic-energy shares v, theta, psi, u_phi
-    coherence: float
-    half_power: dict | None = None
-    raw_damping_ratio: float | None = None
-    fit: object = field(default=None, repr=False, compare=False)  # the guidefit.modes.Mode behind it
-
-    def to_dict(self) -> dict:
-        """JSON-ready; the contract's label/frequency_hz/damping_ratio plus extras."""
-        return {
-            "label": self.label,
-            "frequency_hz": self.frequency_hz,
-            "damping_ratio": self.damping_ratio,
-            "frequency_std_hz": self.frequency_std_hz,
-            "damping_std": self.damping_std,
-            "run": self.run,
-            "model_frequency_hz": self.model_frequency_hz,
-            "coherence": self.coherence,
-            "method": "curve_fit",
-            "damping_ratio_before_window_correction": self.raw_damping_ratio,
-            "half_power": self.half_power,
-            "shape": {k: float(np.real(v)) for k, v in self.shape.items()},
-        }
+    def __post_init__(self):
+        if self.method not in ("global", "per_run"):
+            raise ValueError(f"IdentifySettings.method must be 'global' or 'per_run', got {self.method!r}")
 
 
 @dataclass(frozen=True)
@@ -168,6 +152,7 @@ class Identification:
     missing_modes: tuple = ()
     failed_run_hits: tuple = ()  # hit rows of runs that gave no FRF (every hit rejected)
     hits_checked: bool = True  # False: identified from an FRF file (no time data, no hit checks)
+    modal: object = field(default=None, repr=False, compare=False)  # guidefit.modal_stage.ModalResult
 
     def hit_rows(self) -> list[dict]:
         """Every hit of every run, accepted or rejected, including runs that gave no FRF."""
@@ -191,7 +176,17 @@ class Identification:
                 for ch in self._sensor_channels()
             ],
             "force_levels": [lvl for run in self.runs for lvl in run.force_levels],
+            "run_modes": self.run_modes(),
+            "method": "global_fit" if self.modal is not None else "per_run",
         }
+
+    def run_modes(self) -> list[dict]:
+        """Every run's own all-hits f and zeta of each mode (``level`` None: all hits; nothing dropped).
+
+        The force bins within a run are the ``force_levels`` entries (each
+        with its ``level`` index, 0 = softest hits, frequency and damping).
+        """
+        return [{"label": m.label, **e} for m in list(self.modes) + list(self.extra_modes) for e in m.estimates]
 
     def _sensor_channels(self):
         seen = {}
@@ -223,85 +218,6 @@ class Identification:
 
 
 # --------------------------------------------------------------------------- shapes and labels
-
-
-def sensor_matrix(channels) -> np.ndarray:
-    """(n_channels, 5): each sensor's reading per unit carriage motion (u, v, theta, psi, phi)."""
-    from guidefit.model.vibration import rigid_body_map
-
-    return np.array([np.asarray(ch.direction, float) @ rigid_body_map(ch.position_m) for ch in channels])
-
-
-def real_shape(values) -> np.ndarray:
-    """Rotate complex modal constants to the real axis (best single phase) and return the real part."""
-    v = np.asarray(values, dtype=complex)
-    if not np.any(v):
-        return np.zeros(v.shape)
-    angle = 0.5 * np.angle(np.sum(v**2))
-    r = np.real(v * np.exp(-1j * angle))
-    return r
-
-
-def rigid_body_motion(shape, sensors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Least-squares carriage motion q (5,) behind a shape at the sensors, and which DOFs are observed."""
-    q, *_ = np.linalg.lstsq(sensors, shape, rcond=1e-8)
-    observed = np.linalg.norm(sensors, axis=0) > 0
-    rank_ok = np.linalg.matrix_rank(sensors) == 5
-    if not rank_ok:
-        # null-space DOFs are not observed: min-norm solution sets them to zero
-        _, s, vt = np.linalg.svd(sensors)
-        null = vt[np.sum(s > 1e-8 * s[0]):]
-        observed = np.abs(null).sum(axis=0) < 1e-8
-    return q, observed
-
-
-def energy_shares(q: np.ndarray, mass_matrix: np.ndarray) -> dict:
-    """Kinetic-energy shares of v, theta, psi and u+phi in a carriage motion."""
-    contrib = np.abs(q * (mass_matrix @ q))
-    total = contrib.sum() or 1.0
-    return {"v": contrib[1] / total, "theta": contrib[2] / total, "psi": contrib[3] / total,
-            "u_phi": (contrib[0] + contrib[4]) / total}
-
-
-_GROUP_LABEL = {"v": "vertical", "theta": "pitch", "psi": "yaw"}
-
-
-def label_modes(candidates: list[dict], model) -> list[str]:
-    """Labels for one run's modes from their energy shares (dicts with 'energy', 'frequency_hz', 'q').
-
-    Each of vertical/pitch/yaw goes to the mode of that motion nearest to the
-    model's frequency; the u-phi modes become roll_low (the lowest one whose
-    lateral translation dominates, i.e. lateral sensors in phase) and
-    roll_high (the highest phi-dominated one); the rest are ``extra``.
-    """
-    labels = ["extra"] * len(candidates)
-    groups: dict[str, list[int]] = {}
-    for i, c in enumerate(candidates):
-        g = max(c["energy"], key=c["energy"].get)
-        groups.setdefault(g, []).append(i)
-    for g, label in _GROUP_LABEL.items():
-        members = groups.get(g, [])
-        if members:
-            f_model = model.frequency_hz(label)
-            best = min(members, key=lambda i: abs(math.log(candidates[i]["frequency_hz"] / f_model)))
-            labels[best] = label
-    uphi = sorted(groups.get("u_phi", []), key=lambda i: candidates[i]["frequency_hz"])
-    if uphi:
-        m_u = [abs(candidates[i]["u_energy"]) >= abs(candidates[i]["phi_energy"]) for i in uphi]
-        if not any(m_u) and len(uphi) == 1:
-            # a lone roll-dominated mode is roll_high (a vertical run that misses the damped roll_low)
-            labels[uphi[0]] = "roll_high"
-            return labels
-        low = next((i for i, u in zip(uphi, m_u) if u), uphi[0])
-        labels[low] = "roll_low"
-        rest = [i for i in uphi if i != low and candidates[i]["frequency_hz"] > candidates[low]["frequency_hz"]]
-        if rest:
-            f_model = model.frequency_hz("roll_high")
-            high = min(rest, key=lambda i: abs(math.log(candidates[i]["frequency_hz"] / f_model)))
-            labels[high] = "roll_high"
-    return labels
-
-
 # --------------------------------------------------------------------------- pipeline
 
 
@@ -314,39 +230,6 @@ def _search_band(model, run, settings) -> tuple[float, float]:
 def _hit_row(run_name: str, hit) -> dict:
     return {"run": run_name, "hit": int(hit.index), "start_sample": int(hit.start_sample),
             "peak_force_n": float(hit.peak_force_n), "accepted": bool(hit.accepted), "reason": hit.reason}
-
-
-def _coherence_at(frf, frequency_hz: float, weights) -> float:
-    i = int(np.argmin(np.abs(frf.frequency_hz - frequency_hz)))
-    w = np.abs(weights)
-    if not np.any(w):
-        return float(np.mean(frf.coherence[i]))
-    return float(np.sum(frf.coherence[i] * w) / np.sum(w))
-
-
-def _half_power_entry(frf, mode, tau_s) -> dict | None:
-    """Eq. (26)/(28) on the channel that shows the mode most, with the window correction."""
-    import warnings as _w
-
-    from guidefit import frf as frf_mod
-    from guidefit import modes as modes_mod
-
-    channel = int(np.argmax(np.abs(mode.residues)))
-    peak = int(np.argmin(np.abs(frf.frequency_hz - mode.peak_frequency_hz)))
-    try:
-        with _w.catch_warnings():
-            _w.simplefilter("ignore")
-            hp = modes_mod.half_power(frf.frequency_hz, frf.H[:, channel], peak)
-    except (IdentificationError, ValueError):
-        return None
-    # Eq. (26)/(28) as printed divide by the |H| peak; the exact SDOF accelerance relation gives f_n
-    sdof = modes_mod.sdof_from_half_power(hp.f1_hz, hp.f2_hz)
-    f_n, zeta = sdof.f_n_hz, sdof.zeta
-    if tau_s:
-        f_n, zeta = frf_mod.exponential_window_damping_correction(sdof.zeta, sdof.f_n_hz, tau_s)
-    return {"f_peak_hz": hp.f_peak_hz, "f1_hz": hp.f1_hz, "f2_hz": hp.f2_hz, "zeta": hp.zeta,
-            "f_n_hz": f_n, "zeta_window_corrected": zeta, "channel": frf.channels[channel],
-            "bins_in_band": int(round((hp.f2_hz - hp.f1_hz) / (frf.frequency_hz[1] - frf.frequency_hz[0])))}
 
 
 def _narrow_band(mode) -> tuple[float, float]:
@@ -629,7 +512,7 @@ def _force_levels(run, frf, rows, modes, settings, warnings: list) -> list[dict]
         if frf.exp_window_tau_s else frf_mod.WindowSettings(none=True)
     names = [ch.name for ch in frf_channels(run, frf)]
     levels = []
-    for members in np.array_split(np.argsort(forces), settings.force_bins):
+    for level_index, members in enumerate(np.array_split(np.argsort(forces), settings.force_bins)):
         wanted = {accepted[i]["hit"] for i in members}
         hits = (h for h in iter_hits(run, settings.hits or HitSettings()) if h.index in wanted)
         try:
@@ -648,7 +531,8 @@ def _force_levels(run, frf, rows, modes, settings, warnings: list) -> list[dict]
             refits.update({id(m): _refit_in_band(sub, m.fit, kept) for m in fitted if id(m.fit) not in failed})
         for m in fitted:
             r, band = refits[id(m)]
-            level = {"run": run.name, "label": m.label, "peak_force_n": float(np.mean(forces[members])),
+            level = {"run": run.name, "label": m.label, "level": level_index,
+                     "peak_force_n": float(np.mean(forces[members])),
                      "n_hits": int(len(members)), "hit_forces_n": [float(x) for x in np.sort(forces[members])],
                      "frequency_hz": None, "frequency_std_hz": None, "band_hz": [float(x) for x in band],
                      "hit_position_m": None if run.excitation_position_m is None
@@ -657,11 +541,12 @@ def _force_levels(run, frf, rows, modes, settings, warnings: list) -> list[dict]
             if r is None:  # the mode is not reproduced by this bin's hits: a level without a frequency
                 level["refit_failed"] = True
             else:
-                f_n = r.frequency_hz
+                f_n, z_n = r.frequency_hz, r.damping_ratio
                 if frf.exp_window_tau_s:
-                    f_n, _ = frf_mod.exponential_window_damping_correction(r.damping_ratio, r.frequency_hz,
-                                                                         frf.exp_window_tau_s)
+                    f_n, z_n = frf_mod.exponential_window_damping_correction(r.damping_ratio, r.frequency_hz,
+                                                                           frf.exp_window_tau_s)
                 level["frequency_hz"], level["frequency_std_hz"] = float(f_n), r.frequency_std_hz
+                level["damping_ratio"], level["damping_std"] = float(z_n), r.damping_std
                 level["shape"] = dict(zip(names, (float(v) for v in real_shape(r.modal_constants))))
             levels.append(level)
     return levels
@@ -876,6 +761,8 @@ def identify(path, guide=None, settings: IdentifySettings | None = None) -> Iden
     if not isinstance(guide, Guide):
         guide = load_guide(guide or recording.guide or "MRB35")
     model = vib.solve_modes(vib.model_from_guide(guide))
+    if settings.method == "global":
+        return _identify_global(path, source, guide, model, settings)
     warnings: list[str] = []
     runs = []
     all_modes: list[IdentifiedMode] = []
@@ -906,6 +793,54 @@ def identify(path, guide=None, settings: IdentifySettings | None = None) -> Iden
                           tuple(extras), tuple(missing), tuple(failed_rows), hits_checked=not from_frfs)
 
 
+def _identify_global(path, source, guide, model, settings) -> Identification:
+    """:func:`identify` with one modal model of all runs (:func:`guidefit.modal_stage.identify_frfs`).
+
+    ``source`` is a recording, or an FRF file (:class:`~guidefit.io.frf_files.FrfFile`: no hit checks).
+    """
+    from dataclasses import replace
+
+    from guidefit import modal_stage
+    from guidefit.io.frf_files import FrfFile
+
+    warnings: list[str] = []
+    failed_rows: list[dict] = []
+    from_frfs = isinstance(source, FrfFile)
+    collected = list(file_frfs(source, settings, warnings) if from_frfs
+                     else run_frfs(source, settings, warnings, failed_rows))
+    if not collected:
+        raise IdentificationError(f"{path}: no run gave an FRF ({'; '.join(warnings) or 'no hits'})")
+    frf_by_run = {run.name: frf for run, frf, _ in collected}
+    geometry = {run.name: modal_stage.geometry_of(run, frf) for run, frf, _ in collected}
+    try:
+        res = modal_stage.identify_frfs(frf_by_run, geometry, guide, settings, warnings, model=model)
+    except IdentificationError as exc:
+        warnings.append(str(exc))
+        res = None
+    runs = []
+    for run, frf, rows in collected:
+        views = []
+        if res is not None:
+            for m in res.modes + res.extras:
+                k = m.global_index
+                if run.name in res.fit.runs and res.per_run.get(run.name, [None] * (k + 1))[k] is not None:
+                    views.append(replace(m, run=run.name, fit=res.fit.run_mode(k, run.name),
+                                         shape=m.shapes.get(run.name, m.shape)))
+        levels = _force_levels(run, frf, rows, views, settings, warnings) if settings.force_levels and views else []
+        runs.append(RunResult(run.name, frf, rows, views, tuple(run.excitation_direction),
+                              frf_channels(run, frf), levels))
+    modes = res.modes if res is not None else []
+    joint = {k: next((m for m in modes if m.label == lab), None) for k, lab in JOINT_LABELS.items()}
+    if joint["V"] is None and joint["H"] is None:
+        why = [w for w in warnings if " hit " not in w.split(":", 1)[0]]
+        raise IdentificationError(f"{path}: neither the vertical nor the horizontal joint mode was found"
+                                  + (f" ({'; '.join(why)})" if why else ""))
+    _quality_warnings(modes, settings, warnings)
+    _excitation_warnings(modes, frf_by_run, warnings)
+    params = joint_parameters(guide.mass_kg, joint)
+    return Identification(str(path), guide, tuple(runs), tuple(modes), params, tuple(warnings),
+                          tuple(res.extras), tuple(res.missing), tuple(failed_rows), hits_checked=not from_frfs,
+                          modal=res)
 
 
 def frf_of_recording(path, settings: IdentifySettings | None = None):

@@ -217,14 +217,18 @@ def render_identification(result, console=None) -> None:
     console.print(table)
     from rich import box
 
-    modes = Table(title="modes (f_n, zeta: curve fit; hp: half-power Eq. 26/28, bins in band)",
+    kind = "global fit of all runs" if getattr(result, "modal", None) is not None else "curve fit"
+    modes = Table(title=f"modes (f_n, zeta: {kind}; hp: half-power Eq. 26/28, bins in band)",
                   box=box.SIMPLE_HEAD, pad_edge=False)
     for col in ("label", "run", "f_n (Hz)", "zeta", "model (Hz)", "coh.", "hp zeta"):
         modes.add_column(col, justify="right" if col != "label" else "left")
     for m in list(result.modes) + list(result.extra_modes):
         hp = m.half_power
+        label = m.label
+        if getattr(m, "candidates", ()):
+            label += ": " + "/".join(str(c[0]) for c in m.candidates)
         modes.add_row(
-            m.label, m.run, _pm(m.frequency_hz, m.frequency_std_hz),
+            label, m.run, _pm(m.frequency_hz, m.frequency_std_hz),
             _pm(m.damping_ratio, m.damping_std),
             "-" if m.model_frequency_hz is None else f"{m.model_frequency_hz:.1f}", f"{m.coherence:.3f}",
             "-" if hp is None else f"{hp['zeta_window_corrected']:.4f} ({hp['bins_in_band']})",
@@ -256,7 +260,15 @@ def write_summary_csv(rows: list[dict], path: str) -> None:
 
 
 def plot_identification(result, path: str) -> None:
-    """FRF magnitude, phase and coherence per run with picked modes and half-power bands."""
+    """FRF magnitude, phase and coherence per run with picked modes and half-power bands.
+
+    For a global identification (``result.modal``): the fitted model of each
+    run drawn over its measured FRFs (magnitude and phase, dashed), and the
+    stabilisation diagram of the global fit under them.
+    """
+    if getattr(result, "modal", None) is not None:
+        _plot_global(result, path)
+        return
     import numpy as np
 
     n_runs = len(result.runs)
@@ -285,6 +297,68 @@ def plot_identification(result, path: str) -> None:
         axes[0, j].legend(fontsize=6, ncol=2)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
+
+
+def _plot_global(result, path: str) -> None:
+    """Per run: measured vs fitted magnitude and phase, coherence; below: the stabilisation diagram."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    fit = result.modal.fit
+    runs = [r for r in result.runs if r.name in fit.runs]
+    n = max(len(runs), 1)
+    fig = plt.figure(figsize=(6.5 * n, 12))
+    grid = fig.add_gridspec(4, n, height_ratios=(3, 2, 1.2, 2.6))
+    lo, hi = fit.band_hz
+    for j, run in enumerate(runs):
+        frf = run.frf
+        f = np.asarray(frf.frequency_hz)
+        sel = (f >= 0.8 * lo) & (f <= 1.1 * hi)
+        model = fit.synthesize(run.name)
+        ax_m, ax_p, ax_c = (fig.add_subplot(grid[i, j]) for i in range(3))
+        for k, name in enumerate(frf.channels):
+            color = f"C{k % 10}"
+            ax_m.semilogy(f[sel], np.abs(frf.H[sel, k]), lw=0.8, color=color, label=name)
+            ax_m.semilogy(fit.frequency_hz, np.abs(model[:, k]), "--", lw=0.9, color="k", alpha=0.7)
+            ax_p.plot(f[sel], np.degrees(np.angle(frf.H[sel, k])), lw=0.6, color=color)
+            ax_p.plot(fit.frequency_hz, np.degrees(np.angle(model[:, k])), "--", lw=0.6, color="k", alpha=0.7)
+            ax_c.plot(f[sel], frf.coherence[sel, k], lw=0.6, color=color)
+        for m in run.modes:
+            for ax in (ax_m, ax_p, ax_c):
+                ax.axvline(m.frequency_hz, color="k", ls=":", lw=0.6)
+            ax_m.annotate(m.label, (m.frequency_hz, 1), xycoords=("data", "axes fraction"), rotation=90,
+                          va="top", fontsize=7)
+        for ax in (ax_m, ax_p, ax_c):
+            ax.axvspan(lo, hi, color="C2", alpha=0.04)
+        ax_m.set_title(f"run '{run.name}' ({frf.estimator}, {frf.n_averages} hits): measured, global fit dashed")
+        ax_m.set_ylabel("|H| ((m/s^2)/N)")
+        ax_p.set_ylabel("phase (deg)")
+        ax_c.set_ylabel("coherence")
+        ax_c.set_ylim(0, 1.05)
+        ax_c.set_xlabel("frequency (Hz)")
+        ax_m.legend(fontsize=6, ncol=2)
+    d = fit.diagram
+    ax = fig.add_subplot(grid[3, :])
+    styles = ((~d.stable_f, "o", "0.75", "new"), (d.stable_f & ~d.stable, "x", "C1", "stable f"),
+              (d.stable, "+", "C0", "stable f, zeta, participation"))
+    for mask, marker, color, label in styles:
+        ax.plot(d.frequency_hz[mask], d.orders[mask], marker, ms=4, color=color, ls="none", label=label)
+    for c in fit.selection.chosen:
+        ax.axvline(c.frequency_hz, color="C3", lw=0.8, alpha=0.6)
+    for m in list(result.modes) + list(result.extra_modes):
+        ax.annotate(f"{m.label} {m.frequency_hz:.0f}", (m.frequency_hz, 1), xycoords=("data", "axes fraction"),
+                    rotation=90, va="top", fontsize=7)
+    ax.set_xlim(lo, hi)
+    ax.set_xlabel("frequency (Hz)")
+    ax.set_ylabel("model order (poles)")
+    ax.set_title("stabilisation diagram (poly-reference LSCF, all runs); red: selected poles")
+    ax.legend(fontsize=7, loc="lower right")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
 
 
 class file_progress:

@@ -1,0 +1,452 @@
+r"""The modal stage of ``identify``: FRFs of every run -> global modes -> shapes -> labels.
+
+:func:`identify_frfs` takes the FRF sets of a recording's runs and the
+geometry of their channels (what an FRF file can also provide) and returns
+the labelled modes of one modal model with shared poles
+(:func:`guidefit.globalfit.global_fit`):
+
+1. **Band.** From the model's range (0.35 x its lowest to 1.3 x its highest
+   carriage mode), never above 0.4 x the sample rate, widened to hold the
+   data's own resonances next to it (:func:`global_band`: a base mode just
+   above the carriage modes, a soft rig's lateral mode below them). The
+   hammer's force spectrum does not cut the band (a soft tip's notches are
+   warned about per mode instead).
+2. **Global fit** of all runs and channels (LSCF stabilisation diagram,
+   automatic pole selection, variable-projection refinement, jackknife and
+   selection spread in the std).
+3. **Shapes across runs.** A mode's modal constants in run ``j`` are
+   ``phi(r) phi(e_j)``: the carriage motion ``q`` (u, v, theta, psi, phi) seen
+   by the run's sensors (:func:`guidefit.identify.sensor_matrix` ``S_j``),
+   scaled by the motion at the hit point ``c_j``. :func:`assemble_motion`
+   fits ``m_j = c_j S_j q`` to all runs together (alternating least squares;
+   then, when every run's hit point is known, ``c_j = g_j . q`` with
+   ``g_j`` the hit direction through the rigid-body map, which fixes the
+   relative scale of motions seen by different runs and mass-normalises
+   ``q``).
+4. **Labels** from the kinetic-energy shares of the assembled motion
+   (:func:`guidefit.identify.label_modes`). A mode whose label the data
+   cannot decide -- two energy groups nearly equal, or the deciding DOF not
+   observed by any sensor of the runs that excite it -- is reported as
+   ``ambiguous`` with both candidates and their energy shares, and is not
+   used for the joint parameters.
+
+Examples
+--------
+>>> import numpy as np
+>>> S1 = np.eye(5)[[1, 2, 4]]            # sensors that see v, theta, phi
+>>> S2 = np.eye(5)[[0, 3, 4]]            # sensors that see u, psi, phi
+>>> q = np.array([0.3, 0.0, 0.0, 0.0, 0.9])
+>>> m = {"a": 2.0 * S1 @ q, "b": -0.5 * S2 @ q}
+>>> qa, scale, observed = assemble_motion(m, {"a": S1, "b": S2})
+>>> np.round(np.abs(qa) / np.abs(qa).max(), 3)
+array([0.333, 0.   , 0.   , 0.   , 1.   ])
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from guidefit.errors import IdentificationError
+
+#: second energy group within this share of the first: the label is ambiguous
+AMBIGUOUS_RATIO = 0.8
+
+
+@dataclass(frozen=True)
+class _DefaultSettings:
+    """The options :func:`identify_frfs` reads (those of guidefit.identify.IdentifySettings)."""
+
+    f_min_hz: float | None = None
+    f_max_hz: float | None = None
+    jackknife: bool = True
+
+
+@dataclass(frozen=True)
+class RunGeometry:
+    """What the modal stage needs to know of a run besides its FRFs."""
+
+    name: str
+    channels: tuple  # guidefit.recording.Channel (name, position_m, direction) in FRF column order
+    excitation_direction: tuple
+    excitation_position_m: tuple | None = None
+    sample_rate_hz: float | None = None
+
+
+@dataclass(frozen=True)
+class ModalResult:
+    """Labelled modes of the global fit, plus what the diagnostics need."""
+
+    modes: list  # IdentifiedMode, labelled (joint and other carriage modes)
+    extras: list  # IdentifiedMode: unlabelled or ambiguous
+    missing: list  # model labels not found
+    fit: object  # guidefit.globalfit.GlobalFit
+    per_run: dict = field(default_factory=dict)  # run -> [Mode or None per global mode]
+    band_hz: tuple = ()
+
+
+def geometry_of(run, frf) -> RunGeometry:
+    """:class:`RunGeometry` of a recording's run, channels in the FRF's order."""
+    by_name = {ch.name: ch for ch in run.channels}
+    return RunGeometry(run.name, tuple(by_name[c] for c in frf.channels), tuple(run.excitation_direction),
+                       None if run.excitation_position_m is None else tuple(run.excitation_position_m),
+                       getattr(run, "sample_rate_hz", None))
+
+
+def global_band(model, frf_by_run: dict, geometry: dict, settings) -> tuple[float, float]:
+    """The fitted band: the model's range, cut to what the data can show (see the module docstring)."""
+    f_lo = settings.f_min_hz or 0.35 * float(np.min(model.frequencies_hz))
+    f_hi = settings.f_max_hz or 1.3 * float(np.max(model.frequencies_hz))
+    for name, frf in frf_by_run.items():
+        fs = geometry[name].sample_rate_hz if name in geometry else None
+        f = np.asarray(frf.frequency_hz)
+        f_hi = min(f_hi, 0.4 * fs if fs else 0.8 * float(f[-1]))
+    f_lo, f_hi = _widen_to_peaks(frf_by_run, f_lo, f_hi, settings)
+    return f_lo, f_hi
+
+
+#: prominence (dB) of a mode-indicator peak outside the model's range that widens the band to hold it
+PEAK_PROMINENCE_DB = 6.0
+
+
+def _widen_to_peaks(frf_by_run: dict, f_lo: float, f_hi: float, settings) -> tuple[float, float]:
+    """Widen the band to hold the data's own resonances next to it (a base mode just above the carriage
+    modes, a soft rig's lateral mode below them): up to half ``f_lo`` and twice ``f_hi``, never past
+    0.8 x the last bin."""
+    from guidefit import modes as modes_mod
+
+    lo_cap, hi_cap = 0.5 * f_lo, 2.0 * f_hi
+    for frf in frf_by_run.values():
+        f = np.asarray(frf.frequency_hz)
+        hi_cap = min(hi_cap, 0.8 * float(f[-1]))
+    new_lo, new_hi = f_lo, f_hi
+    for frf in frf_by_run.values():
+        if settings.f_min_hz is not None and settings.f_max_hz is not None:
+            break
+        f = np.asarray(frf.frequency_hz)
+        sel = np.flatnonzero((f >= lo_cap) & (f <= max(hi_cap, lo_cap * 1.01)))
+        if sel.size < 8:
+            continue
+        step = max(1, sel.size // 2000)  # long records: a coarser grid finds the same resonances
+        sel = sel[::step]
+        try:
+            pk = modes_mod.find_peaks(f[sel], np.asarray(frf.H)[sel], min_prominence_db=PEAK_PROMINENCE_DB,
+                                      min_snr_db=20.0)
+        except (ValueError, IdentificationError):
+            continue
+        for fp in pk.frequency_hz:
+            if settings.f_max_hz is None and f_hi < fp <= hi_cap / 1.15:
+                new_hi = max(new_hi, 1.15 * float(fp))
+            if settings.f_min_hz is None and lo_cap / 0.75 <= fp < f_lo:
+                new_lo = min(new_lo, 0.75 * float(fp))
+    return new_lo, min(new_hi, hi_cap) if new_hi > f_hi else f_hi
+
+
+def assemble_motion(constants: dict, sensors: dict, drive: dict | None = None, iterations: int = 20):
+    """Carriage motion q (5,) behind one mode's modal constants in every run.
+
+    Parameters
+    ----------
+    constants : dict run -> (R_j,) real modal constants (1/kg)
+    sensors : dict run -> (R_j, 5) sensor matrices
+    drive : dict run -> (5,) hit-point row (hit direction . rigid-body map), optional
+        When given for every run, ``c_j = drive_j . q`` and q is mass-normalised
+        (``m_j = (S_j q)(drive_j . q)``); else each run has a free scale.
+
+    Returns
+    -------
+    (q, scale, observed)
+        q (5,); the run scales ``c_j``; which DOFs the runs with a non-negligible
+        scale observe (bool (5,)).
+    """
+    runs = [r for r in constants if np.any(constants[r])]
+    if not runs:
+        return np.zeros(5), {r: 0.0 for r in constants}, np.zeros(5, bool)
+    top = max(runs, key=lambda r: np.linalg.norm(constants[r]))
+    q = np.linalg.lstsq(sensors[top], constants[top], rcond=1e-8)[0]
+    scale = {r: 1.0 for r in runs}
+    for _ in range(iterations):
+        for r in runs:
+            y = sensors[r] @ q
+            den = float(y @ y)
+            scale[r] = float(y @ constants[r]) / den if den > 0 else 0.0
+        A = np.vstack([scale[r] * sensors[r] for r in runs])
+        b = np.concatenate([constants[r] for r in runs])
+        q_new = np.linalg.lstsq(A, b, rcond=1e-8)[0]
+        n = np.linalg.norm(q_new)
+        if n == 0:
+            break
+        q_new = q_new / n
+        done = np.linalg.norm(q_new - q / (np.linalg.norm(q) or 1.0)) < 1e-10
+        q = q_new
+        if done:
+            break
+    if drive and all(r in drive and drive[r] is not None for r in runs):
+        q = _driven_motion(q, constants, sensors, drive, runs)
+        scale = {r: float(np.asarray(drive[r]) @ q) for r in runs}
+    top_scale = max(abs(s) for s in scale.values()) or 1.0
+    seen = [r for r in runs if abs(scale[r]) > 0.05 * top_scale]
+    S = np.vstack([sensors[r] for r in seen])
+    _, s, vt = np.linalg.svd(S)
+    null = vt[int(np.sum(s > 1e-8 * s[0])):]
+    observed = np.abs(null).sum(axis=0) < 1e-6 if null.size else np.ones(5, bool)
+    return q, {r: scale.get(r, 0.0) for r in constants}, observed
+
+
+def _driven_motion(q0, constants, sensors, drive, runs):
+    """Least squares of m_j = (S_j q)(g_j . q) from the free-scale solution (mass-normalised q)."""
+    import scipy.optimize
+
+    def resid(q):
+        return np.concatenate([constants[r] - (sensors[r] @ q) * float(np.asarray(drive[r]) @ q) for r in runs])
+
+    # scale of the unit-norm q0 that best fits the quadratic model
+    y = np.concatenate([(sensors[r] @ q0) * float(np.asarray(drive[r]) @ q0) for r in runs])
+    b = np.concatenate([constants[r] for r in runs])
+    den = float(y @ y)
+    if den <= 0 or float(y @ b) <= 0:
+        return q0
+    start = q0 * math.sqrt(float(y @ b) / den)
+    method = "lm" if sum(np.size(constants[r]) for r in runs) >= q0.size else "trf"
+    res = scipy.optimize.least_squares(resid, start, method=method, xtol=1e-12, ftol=1e-12)
+    return res.x if np.sum(res.fun**2) <= np.sum(resid(start) ** 2) else start
+
+
+def _ambiguity(energy: dict, observed: np.ndarray, label: str, model_labels) -> tuple[list, str] | None:
+    """(candidates [(label, share), ...], reason) when the label is not decided by the data, else None."""
+    groups = sorted(energy.items(), key=lambda kv: -kv[1])
+    (g1, e1), (g2, e2) = groups[0], groups[1]
+    name = {"v": "vertical", "theta": "pitch", "psi": "yaw", "u_phi": "roll"}
+    if e2 >= AMBIGUOUS_RATIO * e1:
+        return [(name[g1], float(e1)), (name[g2], float(e2))], "two motions carry nearly equal kinetic energy"
+    if g1 == "u_phi" and not (observed[0] and observed[4]):
+        other = "roll_high" if label == "roll_low" else "roll_low"
+        missing = "lateral translation u" if not observed[0] else "roll phi"
+        return ([(label, float(e1)), (other, float(e1))],
+                f"{missing} is not observed by the sensors of the runs that excite it (u-phi energy share given)")
+    unobserved = [dof for dof, seen in zip(("u", "v", "theta", "psi", "phi"), observed) if not seen]
+    if unobserved and e1 < 0.9:
+        alt = {"u": "roll_low", "v": "vertical", "theta": "pitch", "psi": "yaw", "phi": "roll_high"}[unobserved[0]]
+        return ([(label, float(e1)), (alt, float("nan"))],
+                f"{unobserved[0]} is not observed and the observed motion is mixed")
+    return None
+
+
+#: a second mode of the same motion with this share of the first's carriage energy: which one is the
+#: carriage mode is ambiguous
+SAME_GROUP_RATIO = 0.8
+
+
+def label_by_carriage_energy(candidates: list[dict], model) -> tuple[list[str], dict]:
+    """Labels from the assembled motion when it is mass-normalised (every run's hit point known).
+
+    Each mode's dominant energy group (v, theta, psi, u-phi) says which
+    carriage motion it is; among several modes of one group the carriage mode
+    is the one whose kinetic energy lies most in the carriage
+    (``carriage_energy`` = q^T M q of the mass-normalised motion; a base or
+    rail mode moves the carriage with little of its energy). u-phi modes: the
+    two with most carriage energy are the roll pair, the lower one roll_low
+    (one alone: roll_low when lateral translation dominates it). Returns the labels and, for modes whose label the data do not
+    decide (a second mode of the same group within :data:`SAME_GROUP_RATIO`),
+    ``{index: [(label, share), ...]}``. The model's frequencies are not used.
+    """
+    labels = ["extra"] * len(candidates)
+    ambiguous: dict[int, list] = {}
+    groups: dict[str, list[int]] = {}
+    for i, c in enumerate(candidates):
+        groups.setdefault(max(c["energy"], key=c["energy"].get), []).append(i)
+
+    def share(i):
+        return candidates[i]["carriage_energy"]
+
+    def name(i):
+        return f"at {candidates[i]['frequency_hz']:.0f} Hz"
+
+    for g, label in (("v", "vertical"), ("theta", "pitch"), ("psi", "yaw")):
+        members = sorted(groups.get(g, []), key=lambda i: -share(i))
+        if not members or label not in model.labels:
+            continue
+        labels[members[0]] = label
+        if len(members) > 1 and share(members[1]) >= SAME_GROUP_RATIO * share(members[0]):
+            pair = [(f"{label} {name(i)}", float(share(i))) for i in members[:2]]
+            ambiguous[members[0]] = ambiguous[members[1]] = pair
+    # u-phi: the two modes with most carriage energy are the roll pair (lower: roll_low); one alone is
+    # roll_low when lateral translation dominates it, else roll_high
+    members = sorted(groups.get("u_phi", []), key=lambda i: -share(i))
+    if len(members) == 1:
+        c = candidates[members[0]]
+        labels[members[0]] = "roll_low" if c["u_energy"] >= c["phi_energy"] else "roll_high"
+    elif members:
+        pair = sorted(members[:2], key=lambda i: candidates[i]["frequency_hz"])
+        labels[pair[0]], labels[pair[1]] = "roll_low", "roll_high"
+        if len(members) > 2 and share(members[2]) >= SAME_GROUP_RATIO * share(members[1]):
+            text = [(f"roll {name(i)}", float(share(i))) for i in members[1:3]]
+            ambiguous[members[1]] = ambiguous[members[2]] = text
+    labels = [lab if lab in model.labels or lab == "extra" else "extra" for lab in labels]
+    return labels, ambiguous
+
+
+def identify_frfs(frf_by_run: dict, geometry: dict, guide, settings=None, warnings: list | None = None,
+                  model=None) -> ModalResult:
+    """Fit -> shapes -> labels of the modes of all runs together (the modal stage of identify).
+
+    Parameters
+    ----------
+    frf_by_run : dict of str to guidefit.frf.FrfSet
+    geometry : dict of str to RunGeometry
+        Channel positions and directions (FRF column order) and the hit of each run.
+    guide : guidefit.model.guides.Guide
+    settings : guidefit.identify.IdentifySettings, optional
+        Reads ``f_min_hz``, ``f_max_hz`` (band limits, None: from model and data) and ``jackknife``.
+    warnings : list, optional
+        Problems found are appended (one line each).
+
+    Returns
+    -------
+    ModalResult
+        ``modes`` hold the global estimate of every labelled mode (``run``:
+        the run that shows it most; ``estimates``: every run's own f and zeta).
+
+    Raises
+    ------
+    IdentificationError
+        When no stable mode is found in the band.
+    """
+    from guidefit import globalfit
+    from guidefit.model import vibration as vib
+
+    settings = settings or _DefaultSettings()
+    warnings = warnings if warnings is not None else []
+    spec = vib.model_from_guide(guide)
+    model = model or vib.solve_modes(spec)
+    band = global_band(model, frf_by_run, geometry, settings)
+    _check_band(band, frf_by_run, geometry)
+    gf = globalfit.global_fit(frf_by_run, band, jackknife=settings.jackknife)
+    for name in gf.excluded_runs:
+        warnings.append(f"run '{name}': its FRFs are on another frequency grid; left out of the global fit")
+    per_run = globalfit.run_estimates(gf, frf_by_run)
+    mass = vib.carriage_mass_matrix(spec)
+    from guidefit.modeshapes import sensor_matrix
+
+    sensors = {r: sensor_matrix(geometry[r].channels) for r in gf.runs}
+    drive = {}
+    for r in gf.runs:
+        g = geometry[r]
+        if g.excitation_position_m is None:
+            drive[r] = None
+        else:
+            drive[r] = np.asarray(g.excitation_direction, float) @ vib.rigid_body_map(g.excitation_position_m)
+    candidates = [_candidate(gf, k, sensors, drive, mass) for k in range(len(gf.modes))]
+    return _labelled(gf, candidates, per_run, frf_by_run, geometry, model, warnings, band)
+
+
+def _candidate(gf, k, sensors, drive, mass) -> dict:
+    from guidefit.modeshapes import energy_shares, real_shape
+
+    m = gf.modes[k]
+    mc = real_shape(m.modal_constants)  # one phase for all runs
+    constants = {r: mc[sl] for r, sl in gf.runs.items()}
+    q, scale, observed = assemble_motion(constants, sensors, drive)
+    norm = np.linalg.norm(q) or 1.0
+    qn = q / norm
+    contrib = np.abs(qn * (mass @ qn))
+    amps = {r: float(np.linalg.norm(c)) for r, c in constants.items()}
+    primary = max(amps, key=amps.get)
+    carriage = float(q @ mass @ q) if all(d is not None for d in drive.values()) else None
+    return {"k": k, "mode": m, "carriage_energy": carriage, "frequency_hz": m.frequency_hz, "damping_ratio": m.damping_ratio, "q": qn,
+            "q_raw": q, "energy": energy_shares(qn, mass), "u_energy": contrib[0], "phi_energy": contrib[4],
+            "shape": mc, "constants": constants, "primary": primary, "observed": observed, "scale": scale}
+
+
+def _labelled(gf, candidates, per_run, frf_by_run, geometry, model, warnings, band) -> ModalResult:
+    from guidefit import modeshapes as ident
+
+    by_share: dict = {}
+    if candidates and all(c["carriage_energy"] is not None for c in candidates):
+        labels, by_share = label_by_carriage_energy(candidates, model)
+    else:
+        labels = ident.label_modes(candidates, model) if candidates else []
+    modes, extras = [], []
+    for i, (c, label) in enumerate(zip(candidates, labels)):
+        k, m, run = c["k"], c["mode"], c["primary"]
+        amb, why = by_share.get(i), "a second mode of the same motion has nearly as much carriage energy"
+        if amb is None and label != "extra":
+            amb, why = _ambiguity(c["energy"], c["observed"], label, model.labels) or (None, "")
+        frf = frf_by_run[run]
+        view = gf.run_mode(k, run)
+        names = [ch.name for ch in geometry[run].channels]
+        estimates = [{"run": r, "level": None, "frequency_hz": float(e.frequency_hz),
+                      "damping_ratio": float(e.damping_ratio), "frequency_std_hz": _finite(e.frequency_std_hz),
+                      "damping_std": _finite(e.damping_std)}
+                     for r, row in per_run.items() if (e := row[k]) is not None]
+        parts = gf.std_parts[k]
+        entry = ident.IdentifiedMode(
+            label="ambiguous" if amb else label, run=run, frequency_hz=float(m.frequency_hz),
+            damping_ratio=float(m.damping_ratio), frequency_std_hz=_finite(m.frequency_std_hz),
+            damping_std=_finite(m.damping_std),
+            model_frequency_hz=model.frequency_hz(label) if (label in model.labels and not amb) else None,
+            shape=dict(zip(names, (float(v) for v in c["constants"][run]))),
+            motion=tuple(float(v) for v in c["q"]), energy={kk: float(v) for kk, v in c["energy"].items()},
+            coherence=ident._coherence_at(frf, view.peak_frequency_hz, view.residues),
+            half_power=ident._half_power_entry(frf, view, frf.exp_window_tau_s),
+            raw_damping_ratio=_windowed_damping(m, frf), fit=view,
+            estimates=tuple(estimates), candidates=tuple(amb or ()),
+            shapes={r: dict(zip([ch.name for ch in geometry[r].channels], (float(v) for v in c["constants"][r])))
+                    for r in gf.runs},
+            std_parts={kk: {"frequency_hz": _finite(a), "damping_ratio": _finite(b)} for kk, (a, b) in parts.items()},
+            global_index=k, carriage_energy=c["carriage_energy"],
+        )
+        if amb:
+            text = " or ".join(f"{lab} ({share:.0%})" if math.isfinite(share) else f"{lab} (unobserved)"
+                               for lab, share in amb)
+            warnings.append(f"mode at {m.frequency_hz:.1f} Hz: label ambiguous: {text} ({why}); "
+                            "not used for joint parameters")
+            extras.append(entry)
+        elif label == "extra":
+            warnings.append(f"mode at {m.frequency_hz:.1f} Hz (strongest in run '{run}'): the model does not "
+                            "predict it (not paired with any carriage mode of the model)")
+            extras.append(entry)
+        else:
+            modes.append(entry)
+    found = {m.label for m in modes}
+    missing = [lab for lab in model.labels if lab not in found and not lab.startswith("support")]
+    for lab in missing:
+        warnings.append(f"model mode '{lab}' ({model.frequency_hz(lab):.0f} Hz) not observed in any run")
+    return ModalResult(sorted(modes, key=lambda m: m.frequency_hz), sorted(extras, key=lambda m: m.frequency_hz),
+                       missing, gf, per_run, band)
+
+
+#: fewer FRF bins than this in the band: no mode fit is attempted
+MIN_BINS_IN_BAND = 16
+
+
+def _check_band(band, frf_by_run: dict, geometry: dict) -> None:
+    """One clear line when the band cannot hold a fit: sample rate too low or records too short."""
+    rates = [g.sample_rate_hz for g in geometry.values() if g.sample_rate_hz]
+    if not band[1] > band[0] * 1.05:
+        need = f" (needs at least {band[0] / 0.4:.0f} Hz)" if rates else ""
+        raise IdentificationError(f"sample rate {min(rates, default=float('nan')):g} Hz too low or the hammer's force "
+                                  f"spectrum too narrow for the modes searched from {band[0]:.0f} Hz{need}")
+    frf = max(frf_by_run.values(), key=lambda x: np.count_nonzero((x.frequency_hz >= band[0])
+                                                                  & (x.frequency_hz <= band[1])))
+    freq = np.asarray(frf.frequency_hz)
+    if np.count_nonzero((freq >= band[0]) & (freq <= band[1])) < MIN_BINS_IN_BAND:
+        n = 2 * (len(freq) - 1)
+        raise IdentificationError(f"records of about {n} samples give {freq[-1] / max(len(freq) - 1, 1):.0f} Hz "
+                                  f"resolution, too coarse for the modes between {band[0]:.0f} and {band[1]:.0f} Hz "
+                                  f"(fewer than {MIN_BINS_IN_BAND} bins); longer records are needed")
+
+
+def _finite(v):
+    return float(v) if v is not None and math.isfinite(v) else None
+
+
+def _windowed_damping(mode, frf) -> float:
+    """The damping ratio the windowed FRF shows (before the exponential-window correction)."""
+    tau = getattr(frf, "exp_window_tau_s", None)
+    if not tau:
+        return float(mode.damping_ratio)
+    p = mode.pole - 1.0 / tau
+    return float(-p.real / abs(p))

@@ -1,0 +1,185 @@
+r"""Mode shapes at the sensors: rigid-body motion of the carriage, kinetic-energy shares, labels.
+
+Shared by :mod:`guidefit.identify` (which re-exports every name) and
+:mod:`guidefit.modal_stage`: each sensor's reading per unit carriage motion
+(u, v, theta, psi, phi), the least-squares motion behind a shape, the
+energy shares that name a mode, and :class:`IdentifiedMode`, the labelled
+mode of an identification.
+
+Examples
+--------
+>>> import numpy as np
+>>> round(float(real_shape(np.array([1j, -2j]))[1] / real_shape(np.array([1j, -2j]))[0]), 6)
+-2.0
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from guidefit.errors import IdentificationError
+
+
+@dataclass(frozen=True)
+class IdentifiedMode:
+    """A measured mode with its label, uncertainty and motion at the sensors."""
+
+    label: str
+    run: str
+    frequency_hz: float
+    damping_ratio: float
+    frequency_std_hz: float | None
+    damping_std: float | None
+    model_frequency_hz: float | None
+    shape: dict  # channel -> modal constant (1/kg), real for normal modes
+    motion: tuple  # rigid-body motion (u, v, theta, psi, phi), unit norm
+    energy: dict  # kinetic-energy shares v, theta, psi, u_phi
+    coherence: float
+    half_power: dict | None = None
+    raw_damping_ratio: float | None = None
+    fit: object = field(default=None, repr=False, compare=False)  # the guidefit.modes.Mode behind it
+    estimates: tuple = ()  # every run's own estimate: dicts run, level, frequency_hz, damping_ratio, stds
+    candidates: tuple = ()  # ambiguous label: ((label, energy share), ...)
+    shapes: dict = field(default_factory=dict)  # run -> channel -> modal constant (global fit: every run)
+    std_parts: dict = field(default_factory=dict)  # fit / jackknife / selection std of f and zeta
+    global_index: int | None = field(default=None, compare=False)  # index into the GlobalFit's modes
+    carriage_energy: float | None = None  # share of the mode's kinetic energy in the carriage (q^T M q)
+
+    def to_dict(self) -> dict:
+        """JSON-ready; the contract's label/frequency_hz/damping_ratio plus extras."""
+        return {
+            "label": self.label,
+            "frequency_hz": self.frequency_hz,
+            "damping_ratio": self.damping_ratio,
+            "frequency_std_hz": self.frequency_std_hz,
+            "damping_std": self.damping_std,
+            "run": self.run,
+            "model_frequency_hz": self.model_frequency_hz,
+            "coherence": self.coherence,
+            "method": "curve_fit" if self.global_index is None else "global_fit",
+            "damping_ratio_before_window_correction": self.raw_damping_ratio,
+            "half_power": self.half_power,
+            "shape": {k: float(np.real(v)) for k, v in self.shape.items()},
+            "level": None,  # the all-hits estimate (force bins: force_levels, level 0, 1, ...)
+            "estimates": [dict(e) for e in self.estimates],
+            "candidates": [{"label": lab, "energy_share": share if math.isfinite(share) else None}
+                           for lab, share in self.candidates],
+            "shapes": {r: dict(v) for r, v in self.shapes.items()},
+            "std_parts": {k: dict(v) for k, v in self.std_parts.items()},
+            "motion": [float(v) for v in self.motion],
+            "carriage_energy_share": self.carriage_energy,
+            "energy": dict(self.energy),
+        }
+
+
+def sensor_matrix(channels) -> np.ndarray:
+    """(n_channels, 5): each sensor's reading per unit carriage motion (u, v, theta, psi, phi)."""
+    from guidefit.model.vibration import rigid_body_map
+
+    return np.array([np.asarray(ch.direction, float) @ rigid_body_map(ch.position_m) for ch in channels])
+
+
+def real_shape(values) -> np.ndarray:
+    """Rotate complex modal constants to the real axis (best single phase) and return the real part."""
+    v = np.asarray(values, dtype=complex)
+    if not np.any(v):
+        return np.zeros(v.shape)
+    angle = 0.5 * np.angle(np.sum(v**2))
+    r = np.real(v * np.exp(-1j * angle))
+    return r
+
+
+def rigid_body_motion(shape, sensors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Least-squares carriage motion q (5,) behind a shape at the sensors, and which DOFs are observed."""
+    q, *_ = np.linalg.lstsq(sensors, shape, rcond=1e-8)
+    observed = np.linalg.norm(sensors, axis=0) > 0
+    rank_ok = np.linalg.matrix_rank(sensors) == 5
+    if not rank_ok:
+        # null-space DOFs are not observed: min-norm solution sets them to zero
+        _, s, vt = np.linalg.svd(sensors)
+        null = vt[np.sum(s > 1e-8 * s[0]):]
+        observed = np.abs(null).sum(axis=0) < 1e-8
+    return q, observed
+
+
+def energy_shares(q: np.ndarray, mass_matrix: np.ndarray) -> dict:
+    """Kinetic-energy shares of v, theta, psi and u+phi in a carriage motion."""
+    contrib = np.abs(q * (mass_matrix @ q))
+    total = contrib.sum() or 1.0
+    return {"v": contrib[1] / total, "theta": contrib[2] / total, "psi": contrib[3] / total,
+            "u_phi": (contrib[0] + contrib[4]) / total}
+
+
+_GROUP_LABEL = {"v": "vertical", "theta": "pitch", "psi": "yaw"}
+
+
+def label_modes(candidates: list[dict], model) -> list[str]:
+    """Labels for one run's modes from their energy shares (dicts with 'energy', 'frequency_hz', 'q').
+
+    Each of vertical/pitch/yaw goes to the mode of that motion nearest to the
+    model's frequency; the u-phi modes become roll_low (the lowest one whose
+    lateral translation dominates, i.e. lateral sensors in phase) and
+    roll_high (the highest phi-dominated one); the rest are ``extra``.
+    """
+    labels = ["extra"] * len(candidates)
+    groups: dict[str, list[int]] = {}
+    for i, c in enumerate(candidates):
+        g = max(c["energy"], key=c["energy"].get)
+        groups.setdefault(g, []).append(i)
+    for g, label in _GROUP_LABEL.items():
+        members = groups.get(g, [])
+        if members:
+            f_model = model.frequency_hz(label)
+            best = min(members, key=lambda i: abs(math.log(candidates[i]["frequency_hz"] / f_model)))
+            labels[best] = label
+    uphi = sorted(groups.get("u_phi", []), key=lambda i: candidates[i]["frequency_hz"])
+    if uphi:
+        m_u = [abs(candidates[i]["u_energy"]) >= abs(candidates[i]["phi_energy"]) for i in uphi]
+        if not any(m_u) and len(uphi) == 1:
+            # a lone roll-dominated mode is roll_high (a vertical run that misses the damped roll_low)
+            labels[uphi[0]] = "roll_high"
+            return labels
+        low = next((i for i, u in zip(uphi, m_u) if u), uphi[0])
+        labels[low] = "roll_low"
+        rest = [i for i in uphi if i != low and candidates[i]["frequency_hz"] > candidates[low]["frequency_hz"]]
+        if rest:
+            f_model = model.frequency_hz("roll_high")
+            high = min(rest, key=lambda i: abs(math.log(candidates[i]["frequency_hz"] / f_model)))
+            labels[high] = "roll_high"
+    return labels
+
+
+def _coherence_at(frf, frequency_hz: float, weights) -> float:
+    i = int(np.argmin(np.abs(frf.frequency_hz - frequency_hz)))
+    w = np.abs(weights)
+    if not np.any(w):
+        return float(np.mean(frf.coherence[i]))
+    return float(np.sum(frf.coherence[i] * w) / np.sum(w))
+
+
+def _half_power_entry(frf, mode, tau_s) -> dict | None:
+    """Eq. (26)/(28) on the channel that shows the mode most, with the window correction."""
+    import warnings as _w
+
+    from guidefit import frf as frf_mod
+    from guidefit import modes as modes_mod
+
+    channel = int(np.argmax(np.abs(mode.residues)))
+    peak = int(np.argmin(np.abs(frf.frequency_hz - mode.peak_frequency_hz)))
+    try:
+        with _w.catch_warnings():
+            _w.simplefilter("ignore")
+            hp = modes_mod.half_power(frf.frequency_hz, frf.H[:, channel], peak)
+    except (IdentificationError, ValueError):
+        return None
+    # Eq. (26)/(28) as printed divide by the |H| peak; the exact SDOF accelerance relation gives f_n
+    sdof = modes_mod.sdof_from_half_power(hp.f1_hz, hp.f2_hz)
+    f_n, zeta = sdof.f_n_hz, sdof.zeta
+    if tau_s:
+        f_n, zeta = frf_mod.exponential_window_damping_correction(sdof.zeta, sdof.f_n_hz, tau_s)
+    return {"f_peak_hz": hp.f_peak_hz, "f1_hz": hp.f1_hz, "f2_hz": hp.f2_hz, "zeta": hp.zeta,
+            "f_n_hz": f_n, "zeta_window_corrected": zeta, "channel": frf.channels[channel],
+            "bins_in_band": int(round((hp.f2_hz - hp.f1_hz) / (frf.frequency_hz[1] - frf.frequency_hz[0])))}
