@@ -167,6 +167,8 @@ class Identification:
     extra_modes: tuple = ()
     missing_modes: tuple = ()
     failed_run_hits: tuple = ()  # hit rows of runs that gave no FRF (every hit rejected)
+    gate: str | None = None  # why the modes are not those of a carriage on this guide (no joint parameters)
+    sensor_faults: tuple = ()  # guidefit.consistency.SensorFault of channels that do not fit rigid motion
 
     def hit_rows(self) -> list[dict]:
         """Every hit of every run, accepted or rejected, including runs that gave no FRF."""
@@ -189,6 +191,10 @@ class Identification:
                 for ch in self._sensor_channels()
             ],
             "force_levels": [lvl for run in self.runs for lvl in run.force_levels],
+            "gate": self.gate,
+            "sensor_faults": [{"channel": f.channel, "kind": f.kind, "factor": f.factor, "axis": f.axis,
+                               "alternatives": list(f.alternatives), "message": f.message}
+                              for f in self.sensor_faults],
         }
 
     def _sensor_channels(self):
@@ -216,6 +222,7 @@ class Identification:
             row[f"{name}_{suffix}"] = p["value"]
             row[f"{name}_std_{suffix}"] = p["std"]
         row["n_warnings"] = len(self.warnings)
+        row["gate"] = self.gate
         return row
 
 
@@ -862,6 +869,14 @@ def identify(path, guide=None, settings: IdentifySettings | None = None) -> Iden
     if not runs:
         raise IdentificationError(f"{path}: no run gave an FRF ({'; '.join(warnings) or 'no hits'})")
     axes = {r.name: int(np.argmax(np.abs(r.excitation_direction))) for r in runs}
+    # sensor consistency and plausibility gate (guidefit.consistency): a channel that does not fit rigid
+    # carriage motion is named, corrected and every run re-labelled; the gate below withholds K and c
+    from guidefit import consistency
+
+    sensors = consistency.check_sensors(runs, all_modes, recording, guide, model, settings,
+                                        refit=lambda run, frf: _fit_run(run, frf, guide, model, settings, []))
+    runs, all_modes = sensors.runs, sensors.modes
+    warnings.extend(sensors.warnings)
     modes, extras, missing = _select(all_modes, model, warnings, axes)
     if settings.jackknife:
         modes = _with_jackknife(modes, {r.name: r.frf for r in runs})
@@ -873,8 +888,13 @@ def identify(path, guide=None, settings: IdentifySettings | None = None) -> Iden
     _quality_warnings(modes, settings, warnings)
     _excitation_warnings(modes, {r.name: r.frf for r in runs}, warnings)
     params = joint_parameters(guide.mass_kg, joint)
+    gate = consistency.plausibility(modes, missing, sensors.sets, model)
+    warnings.extend(consistency.mass_warnings(modes, sensors.sets, vib.carriage_mass_matrix(
+        vib.model_from_guide(guide)), guide.mass_kg))
+    if gate is not None:
+        params = joint_parameters(guide.mass_kg, {})
     return Identification(str(path), guide, tuple(runs), tuple(modes), params, tuple(warnings),
-                          tuple(extras), tuple(missing), tuple(failed_rows))
+                          tuple(extras), tuple(missing), tuple(failed_rows), gate, sensors.faults)
 
 
 
