@@ -219,7 +219,7 @@ def render_identification(result, console=None) -> None:
         console.print(table)
     else:  # the plausibility gate: modes below, no joint parameters
         console.print(f"{result.file}  (guide {result.guide.name}): [red]no joint parameters:[/red] {gate}",
-                      markup=True, highlight=False)
+                      markup=True, highlight=False, soft_wrap=True)
     from rich import box
 
     modes = Table(title="modes (f_n, zeta: curve fit; hp: half-power Eq. 26/28, bins in band)",
