@@ -291,7 +291,7 @@ def _failed_json(path, guide_name, code, error) -> dict:
         except Exception:  # noqa: BLE001 - unreadable file: the guide is unknown
             guide = None
     return {"file": str(path), "guide": guide, "parameters": joint_parameters(1.0, {}), "modes": [],
-            "warnings": [error], "error": error, "exit_code": code}
+            "warnings": [error], "error": error, "exit_code": code, "gate": None, "sensor_faults": []}
 
 
 def _map_files(files, guide_name, settings, jobs, console):
