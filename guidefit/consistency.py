@@ -118,7 +118,9 @@ class ShapeSet:
 
     ``sensors`` is (n_channels, 5) (:func:`guidefit.identify.sensor_matrix`),
     ``shapes`` (n_modes, n_channels); ``driving`` is the hammer's row (5,)
-    (its direction times the rigid-body map at the hit point), None if unknown.
+    (its direction times the rigid-body map at the hit point), None if unknown;
+    ``labels`` and ``frequencies_hz`` name the modes, ``band_hz`` is where they
+    were searched (a model mode outside it is not expected).
     """
 
     run: str
@@ -130,6 +132,7 @@ class ShapeSet:
     driving: np.ndarray | None = None
     labels: tuple = ()
     frequencies_hz: tuple = ()
+    band_hz: tuple = (0.0, math.inf)  # the band in which the run's modes were searched
 
 
 @dataclass(frozen=True)
@@ -484,10 +487,12 @@ def observable_modes(model, sets: list[ShapeSet], threshold: float = 0.1) -> set
     seen = set()
     shapes = np.asarray(model.shapes)[:5]
     labels = [lab for lab in model.labels]
+    freqs = np.asarray(model.frequencies_hz)
     for s in sets:
         if s.driving is None or not len(s.channels):
             continue
         vis = np.abs(s.driving @ shapes) * np.linalg.norm(s.sensors @ shapes, axis=0)
+        vis = np.where((freqs >= s.band_hz[0]) & (freqs <= s.band_hz[1]), vis, 0.0)
         top = float(vis.max())
         if top <= 0:
             continue
@@ -539,11 +544,27 @@ def plausibility(modes, missing, sets: list[ShapeSet], model) -> str | None:
     return None
 
 
-def mass_warnings(modes, sets: list[ShapeSet], mass_matrix: np.ndarray, mass_kg: float) -> list[str]:
+def _sees(sensors: np.ndarray, motion: np.ndarray, mass_matrix: np.ndarray) -> bool:
+    """Whether the sensors determine a mode of ``motion`` (5,): no motion they cannot see (null space of
+    the sensor matrix) shares more than 10 % of its kinetic energy metric (the mass-weighted cosine)."""
+    _, sv, vt = np.linalg.svd(sensors)
+    rank = int(np.sum(sv > 1e-8 * sv[0])) if sv.size and sv[0] > 0 else 0
+    norm = math.sqrt(max(float(motion @ mass_matrix @ motion), 1e-300))
+    for n in vt[rank:]:
+        cos = float(motion @ mass_matrix @ n) / (norm * math.sqrt(float(n @ mass_matrix @ n)))
+        if abs(cos) > 0.1:
+            return False
+    return True
+
+
+def mass_warnings(modes, sets: list[ShapeSet], mass_matrix: np.ndarray, mass_kg: float, model=None) -> list[str]:
     """Warnings for joint modes whose modal mass from the residues is far from the guide's carriage.
 
     Uses each mode's shape in its own run (sensor faults corrected) and the
-    run's driving point; see :func:`modal_mass_ratio`.
+    run's driving point; see :func:`modal_mass_ratio`. With ``model`` given, a
+    run whose sensors cannot determine the model's motion of that mode (A and
+    B alone cannot tell u from psi) is skipped: its least-squares motion, and
+    so its modal mass, would be biased.
     """
     out = []
     for m in modes:
@@ -551,6 +572,9 @@ def mass_warnings(modes, sets: list[ShapeSet], mass_matrix: np.ndarray, mass_kg:
             continue
         s = next((x for x in sets if x.run == m.run), None)
         if s is None or s.driving is None:
+            continue
+        if model is not None and m.label in model.labels and not _sees(
+                s.sensors, np.asarray(model.shapes)[:5, list(model.labels).index(m.label)], mass_matrix):
             continue
         k = next((i for i, (lab, f) in enumerate(zip(s.labels, s.frequencies_hz))
                   if lab == m.label and abs(f - m.frequency_hz) < 1e-6 * m.frequency_hz + 1e-9), None)
@@ -576,10 +600,12 @@ def driving_row(direction, position_m) -> np.ndarray:
     return np.asarray(direction, float) @ rigid_body_map(pos)
 
 
-def shape_sets(runs, modes, hit_points: dict) -> list[ShapeSet]:
+def shape_sets(runs, modes, hit_points: dict, band_hz=(None, None)) -> list[ShapeSet]:
     """One :class:`ShapeSet` per run result from identify's modes (``shape`` dicts, real modal constants).
 
-    ``hit_points`` maps run name to the hit position (m) or None.
+    ``hit_points`` maps run name to the hit position (m) or None; ``band_hz``
+    is identify's (f_min_hz, f_max_hz) setting, the top cut to 0.4 times the
+    run's sample rate as identify's search band is.
     """
     from guidefit.identify import sensor_matrix
 
@@ -592,8 +618,17 @@ def shape_sets(runs, modes, hit_points: dict) -> list[ShapeSet]:
                             np.array([np.asarray(c.position_m, float) for c in chans]).reshape(-1, 3),
                             np.array([np.asarray(c.direction, float) for c in chans]).reshape(-1, 3),
                             shapes, driving_row(run.excitation_direction, hit_points.get(run.name)),
-                            tuple(m.label for m in mine), tuple(m.frequency_hz for m in mine)))
+                            tuple(m.label for m in mine), tuple(m.frequency_hz for m in mine),
+                            _band(run, band_hz)))
     return out
+
+
+def _band(run, band_hz) -> tuple:
+    """The search band of a run result: identify's settings, at most 0.4 fs (0.8 of the last FRF bin)."""
+    freq = np.asarray(getattr(run.frf, "frequency_hz", [np.inf]), dtype=float)
+    top = 0.8 * float(freq[-1]) if freq.size else math.inf
+    lo, hi = band_hz
+    return (float(lo or 0.0), min(float(hi) if hi else math.inf, top))
 
 
 def relabel(modes, sets: list[ShapeSet], model, mass_matrix: np.ndarray) -> list:
@@ -706,7 +741,8 @@ def check_sensors(runs, modes, recording, guide, model, settings=None, refit=Non
 
     mass = vib.carriage_mass_matrix(vib.model_from_guide(guide))
     hit_points = _hit_points(recording)
-    sets = shape_sets(runs, modes, hit_points)
+    band = (getattr(settings, "f_min_hz", None), getattr(settings, "f_max_hz", None))
+    sets = shape_sets(runs, modes, hit_points, band)
     faults = find_sensor_faults(sets, mass)
     if not faults:
         return SensorCheck((), list(runs), list(modes), sets, [])
@@ -732,4 +768,4 @@ def check_sensors(runs, modes, recording, guide, model, settings=None, refit=Non
         fitted = refit(run, frf)
         new_runs.append(replace(rr, frf=frf, modes=fitted, channels=frf_channels(run, frf)))
         new_modes.extend(fitted)
-    return SensorCheck(faults, new_runs, new_modes, shape_sets(new_runs, new_modes, hit_points), messages)
+    return SensorCheck(faults, new_runs, new_modes, shape_sets(new_runs, new_modes, hit_points, band), messages)

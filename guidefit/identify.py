@@ -890,7 +890,7 @@ def identify(path, guide=None, settings: IdentifySettings | None = None) -> Iden
     params = joint_parameters(guide.mass_kg, joint)
     gate = consistency.plausibility(modes, missing, sensors.sets, model)
     warnings.extend(consistency.mass_warnings(modes, sensors.sets, vib.carriage_mass_matrix(
-        vib.model_from_guide(guide)), guide.mass_kg))
+        vib.model_from_guide(guide)), guide.mass_kg, model))
     if gate is not None:
         params = joint_parameters(guide.mass_kg, {})
     return Identification(str(path), guide, tuple(runs), tuple(modes), params, tuple(warnings),

@@ -201,6 +201,20 @@ def test_clean_and_coupled_recordings_raise_nothing(tmp_path, effects):
     assert result.parameters["K_V"]["value"] == pytest.approx(truth["parameters"]["K_V"]["value"], rel=2e-3)
 
 
+@pytest.mark.parametrize("config", [dict(sensors="AB"), dict(axes="y"), dict(sample_rate_hz=12800.0, record_s=0.06)],
+                         ids=["sensors_A_B_only", "y_axes_only", "fs_12800"])
+def test_sparse_or_slow_set_ups_raise_nothing(tmp_path, config):
+    """A and B alone cannot tell u from psi (the least-squares motion, and so the modal mass, of a lateral
+    mode would be biased: was a '21 kg, factor 9.81' warning); y sensors alone see no u or psi; at 12.8 kHz
+    roll_high lies above the search band and is not expected."""
+    cfg = SimulationConfig(**{"hits": 3, "record_s": 0.02, **config})
+    data, truth = simulate("MRB35", config=cfg, seed=3)
+    result, _ = _identify(tmp_path, data)
+    assert result.sensor_faults == () and result.gate is None
+    assert not [w for w in result.warnings if "modal mass" in w]
+    assert result.parameters["f_V"]["value"] == pytest.approx(truth["parameters"]["f_V"]["value"], rel=5e-4)
+
+
 def test_bundled_sample_stays_clean():
     sample = Path(__file__).parents[1] / "sample_data" / "mrb35_sample.h5"
     result = identify(sample, settings=FAST)
