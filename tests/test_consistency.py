@@ -171,6 +171,18 @@ def test_faulty_channel_named_with_its_size_and_modes_unspoilt(tmp_path, simulat
     _accurate(result, truth)
 
 
+def test_fault_found_and_clean_silent_at_thirty_times_the_noise(tmp_path):
+    """Sensor noise 0.3 % of the range (about 1 % of the peak response): the sign flip is still found, the
+    factor within 1 %, and the same recording without the fault stays silent."""
+    data, _ = simulate("MRB35", config=SimulationConfig(hits=3, record_s=0.02, noise_fraction=3e-3), seed=1)
+    clean, _ = _identify(tmp_path, data, "clean")
+    assert clean.sensor_faults == () and clean.gate is None
+    flipped, _ = _identify(tmp_path, _edit(data, "acc_C_y", -1.0), "flipped")
+    (fault,) = flipped.sensor_faults
+    assert fault.channel == "acc_C_y" and fault.factor == pytest.approx(-1.0, rel=0.01)
+    assert flipped.parameters["f_V"]["value"] == pytest.approx(clean.parameters["f_V"]["value"], rel=1e-6)
+
+
 def test_sensor_fault_in_json_and_on_the_command_line(tmp_path, simulated):
     data, _ = simulated
     path = tmp_path / "flipped.h5"
@@ -213,6 +225,29 @@ def test_sparse_or_slow_set_ups_raise_nothing(tmp_path, config):
     assert result.sensor_faults == () and result.gate is None
     assert not [w for w in result.warnings if "modal mass" in w]
     assert result.parameters["f_V"]["value"] == pytest.approx(truth["parameters"]["f_V"]["value"], rel=5e-4)
+
+
+@pytest.mark.parametrize("kw", [dict(), dict(layout="signals", units_acc="g"), dict(k_support=1.2e8)],
+                         ids=["standard", "signals_in_g", "paper_soft_rig"])
+def test_independent_contract_recordings_raise_nothing(tmp_path, kw):
+    """The conformance audit's own writer (tests/_contract_gen.py, no guidefit code), incl. the paper-like soft
+    rig (lateral support 1.2e8 N/m: f_H 1081 Hz, zeta_H 10.5 %) and accelerations stored in g."""
+    import _contract_gen as gen
+
+    if "k_support" in kw:
+        spec = {}
+        for i, run in enumerate(("vertical", "lateral")):
+            chans, data = gen.run_hits(run, n_hits=2, n=6000, seed=i, k_support=kw["k_support"],
+                                       zetas=[0.105, 0.02, 0.02, 0.0288, 0.02])
+            spec[run] = dict(chans=chans, data=data, fs=200_000.0, direction=gen.RUNS[run][1],
+                             position=gen.RUNS[run][0])
+        path = gen.write_file(tmp_path / "soft.h5", spec)
+    else:
+        path = gen.standard_file(tmp_path / "std.h5", n_hits=2, n=4000, **kw)
+    result = identify(path, settings=FAST)
+    assert result.sensor_faults == () and result.gate is None
+    assert not [w for w in result.warnings if "modal mass" in w]
+    assert result.parameters["K_V"]["value"] > 0 and result.parameters["K_H"]["value"] > 0
 
 
 def test_bundled_sample_stays_clean():
