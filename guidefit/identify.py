@@ -870,7 +870,7 @@ def identify(path, guide=None, settings: IdentifySettings | None = None) -> Iden
         raise IdentificationError(f"{path}: no run gave an FRF ({'; '.join(warnings) or 'no hits'})")
     axes = {r.name: int(np.argmax(np.abs(r.excitation_direction))) for r in runs}
     # sensor consistency and plausibility gate (guidefit.consistency): a channel that does not fit rigid
-    # carriage motion is named, corrected and every run re-labelled; the gate below withholds K and c
+    # carriage motion is named and its runs fitted again with it corrected; the gate below withholds K and c
     from guidefit import consistency
 
     sensors = consistency.check_sensors(runs, all_modes, recording, guide, model, settings,

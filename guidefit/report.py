@@ -218,8 +218,10 @@ def render_identification(result, console=None) -> None:
             table.add_row(name, _pm(p["value"], p["std"], p["unit"]), eqs[name])
         console.print(table)
     else:  # the plausibility gate: modes below, no joint parameters
-        console.print(f"{result.file}  (guide {result.guide.name}): [red]no joint parameters:[/red] {gate}",
-                      markup=True, highlight=False, soft_wrap=True)
+        from rich.markup import escape
+
+        console.print(f"{escape(str(result.file))}  (guide {escape(result.guide.name)}): [red]no joint parameters:"
+                      f"[/red] {escape(gate)}", markup=True, highlight=False, soft_wrap=True)
     from rich import box
 
     modes = Table(title="modes (f_n, zeta: curve fit; hp: half-power Eq. 26/28, bins in band)",
