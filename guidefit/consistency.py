@@ -600,6 +600,14 @@ def driving_row(direction, position_m) -> np.ndarray:
     return np.asarray(direction, float) @ rigid_body_map(pos)
 
 
+def sensor_rows(channels) -> np.ndarray:
+    """(n_channels, 5): each sensor's reading per unit carriage motion; the same matrix as
+    :func:`guidefit.identify.sensor_matrix` (identify imports this module, so it is not imported here)."""
+    from guidefit.model.vibration import rigid_body_map
+
+    return np.array([np.asarray(ch.direction, float) @ rigid_body_map(ch.position_m) for ch in channels])
+
+
 def shape_sets(runs, modes, hit_points: dict, band_hz=(None, None)) -> list[ShapeSet]:
     """One :class:`ShapeSet` per run result from identify's modes (``shape`` dicts, real modal constants).
 
@@ -607,14 +615,12 @@ def shape_sets(runs, modes, hit_points: dict, band_hz=(None, None)) -> list[Shap
     is identify's (f_min_hz, f_max_hz) setting, the top cut to 0.4 times the
     run's sample rate as identify's search band is.
     """
-    from guidefit.identify import sensor_matrix
-
     out = []
     for run in runs:
         chans = list(run.channels)
         mine = [m for m in modes if m.run == run.name]
         shapes = np.array([[m.shape.get(c.name, 0.0) for c in chans] for m in mine]).reshape(len(mine), len(chans))
-        out.append(ShapeSet(run.name, tuple(c.name for c in chans), sensor_matrix(chans),
+        out.append(ShapeSet(run.name, tuple(c.name for c in chans), sensor_rows(chans),
                             np.array([np.asarray(c.position_m, float) for c in chans]).reshape(-1, 3),
                             np.array([np.asarray(c.direction, float) for c in chans]).reshape(-1, 3),
                             shapes, driving_row(run.excitation_direction, hit_points.get(run.name)),
@@ -629,33 +635,6 @@ def _band(run, band_hz) -> tuple:
     top = 0.8 * float(freq[-1]) if freq.size else math.inf
     lo, hi = band_hz
     return (float(lo or 0.0), min(float(hi) if hi else math.inf, top))
-
-
-def relabel(modes, sets: list[ShapeSet], model, mass_matrix: np.ndarray) -> list:
-    """Identify's modes with shapes, rigid motion, energy and labels from the (corrected) sets.
-
-    Each run's modes are re-labelled together (:func:`guidefit.identify.label_modes`).
-    """
-    from guidefit.identify import energy_shares, label_modes, rigid_body_motion
-
-    out = list(modes)
-    for s in sets:
-        idx = [i for i, m in enumerate(modes) if m.run == s.run]
-        cands = []
-        for k, i in enumerate(idx):
-            q, _ = rigid_body_motion(s.shapes[k], s.sensors)
-            q = q / (np.linalg.norm(q) or 1.0)
-            contrib = np.abs(q * (mass_matrix @ q))
-            cands.append({"frequency_hz": modes[i].frequency_hz, "q": q, "energy": energy_shares(q, mass_matrix),
-                          "u_energy": contrib[0], "phi_energy": contrib[4]})
-        for k, (i, label) in enumerate(zip(idx, label_modes(cands, model))):
-            c = cands[k]
-            out[i] = replace(modes[i], label=label,
-                             model_frequency_hz=model.frequency_hz(label) if label in model.labels else None,
-                             shape=dict(zip(s.channels, (float(v) for v in s.shapes[k]))),
-                             motion=tuple(float(v) for v in c["q"]),
-                             energy={key: float(v) for key, v in c["energy"].items()})
-    return out
 
 
 def corrected_frf(frf, faults):
@@ -717,7 +696,7 @@ def _hit_points(recording) -> dict:
             for r in recording.runs}
 
 
-def check_sensors(runs, modes, recording, guide, model, settings=None, refit=None) -> SensorCheck:
+def check_sensors(runs, modes, recording, guide, model, settings, refit) -> SensorCheck:
     """Find faulty channels in identify's modes and identify again without their faults.
 
     Parameters
@@ -729,13 +708,13 @@ def check_sensors(runs, modes, recording, guide, model, settings=None, refit=Non
         For the hit points and the runs' channels.
     guide, model
         The guide and its nominal modal solution.
-    settings : guidefit.identify.IdentifySettings, optional
-        How identify computed the FRFs (needed with ``refit`` for axis faults).
-    refit : callable (Run, FrfSet) -> list of IdentifiedMode, optional
-        Fits one run's modes again; given, every run with a faulty channel is
+    settings : guidefit.identify.IdentifySettings
+        How identify computed the FRFs (they are computed again for axis faults).
+    refit : callable (Run, FrfSet) -> list of IdentifiedMode
+        Fits and labels one run's modes; every run with a faulty channel is
         fitted again on its corrected FRFs (a channel read 1000x too high no
-        longer hides the modes the others see); else the modes are only
-        re-labelled from corrected shapes (:func:`relabel`).
+        longer hides the modes the others see, a wrong axis no longer pulls
+        the window or the labels).
     """
     from guidefit.model import vibration as vib
 
@@ -747,13 +726,6 @@ def check_sensors(runs, modes, recording, guide, model, settings=None, refit=Non
     if not faults:
         return SensorCheck((), list(runs), list(modes), sets, [])
     messages = [f.message for f in faults]
-    if refit is None:
-        fixed = apply_faults(sets, faults)
-        relabelled = relabel(modes, fixed, model, mass)
-        fixed = [replace(s, labels=tuple(m.label for m in relabelled if m.run == s.run)) for s in fixed]
-        return SensorCheck(faults, list(runs), relabelled, fixed, messages)
-    from guidefit.identify import frf_channels
-
     by_name = {r.name: r for r in recording.runs}
     new_runs, new_modes = [], []
     for rr in runs:
@@ -766,6 +738,7 @@ def check_sensors(runs, modes, recording, guide, model, settings=None, refit=Non
         drop = {f.channel for f in faults if f.kind == "axis"} & names
         frf = corrected_frf(frf_without(run, drop, settings) if drop else rr.frf, faults)
         fitted = refit(run, frf)
-        new_runs.append(replace(rr, frf=frf, modes=fitted, channels=frf_channels(run, frf)))
+        chans = {ch.name: ch for ch in run.channels}
+        new_runs.append(replace(rr, frf=frf, modes=fitted, channels=[chans[name] for name in frf.channels]))
         new_modes.extend(fitted)
     return SensorCheck(faults, new_runs, new_modes, shape_sets(new_runs, new_modes, hit_points, band), messages)
