@@ -31,7 +31,10 @@ whose correction explains the data equally well (the A and B x-sensors sit at
 the same z, so rigid motion alone cannot tell which of them is wrong) are
 told apart by the driving-point residue, which must be positive for every
 mode, and by the modal mass (below); when neither decides, the warning names
-both. Up to :data:`MAX_FAULTS` faults are found one after the other. Real
+both. Up to :data:`MAX_FAULTS` faults are found one after the other; then
+:func:`check_sensors` has identify fit each run with a faulty channel again
+on corrected FRFs (a scale fault divided out, an axis fault's channel left
+out and the FRFs computed again), so labels, K and c come from good data. Real
 coupled physics (a corner mass, a damaged row, a base with its own mode)
 keeps the carriage rigid and stays silent; shapes of modes fitted from a
 noisy or weak peak are weighted by their amplitude relative to the run's
