@@ -183,6 +183,19 @@ def test_fault_found_and_clean_silent_at_thirty_times_the_noise(tmp_path):
     assert flipped.parameters["f_V"]["value"] == pytest.approx(clean.parameters["f_V"]["value"], rel=1e-6)
 
 
+def test_corrected_channel_gives_the_clean_file_numbers_jackknife_included(tmp_path, simulated):
+    """The refit runs on the FRFs with the x1000 channel divided out, group sums too: f, zeta and their
+    jackknife std are those of the clean recording (to rounding), not merely close to the truth."""
+    data, _ = simulated
+    write_recording(tmp_path / "clean.h5", _edit(data))
+    write_recording(tmp_path / "k.h5", _edit(data, "acc_A_x", 1000.0))
+    clean, faulty = identify(tmp_path / "clean.h5"), identify(tmp_path / "k.h5")
+    assert [f.channel for f in faulty.sensor_faults] == ["acc_A_x"]
+    for key in ("f_V", "f_H", "zeta_V", "zeta_H"):
+        assert faulty.parameters[key]["value"] == pytest.approx(clean.parameters[key]["value"], rel=1e-9)
+        assert faulty.parameters[key]["std"] == pytest.approx(clean.parameters[key]["std"], rel=1e-6)
+
+
 def test_sensor_fault_in_json_and_on_the_command_line(tmp_path, simulated):
     data, _ = simulated
     path = tmp_path / "flipped.h5"
