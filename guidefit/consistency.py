@@ -31,7 +31,8 @@ whose correction explains the data equally well (the A and B x-sensors sit at
 the same z, so rigid motion alone cannot tell which of them is wrong) are
 told apart by the driving-point residue, which must be positive for every
 mode, and by the modal mass (below); when neither decides, the warning names
-both. Up to :data:`MAX_FAULTS` faults are found one after the other; then
+both. Up to :data:`MAX_FAULTS` faults are found one after the other, or as
+a pair when no single correction explains the residual; then
 :func:`check_sensors` has identify fit each run with a faulty channel again
 on corrected FRFs (a scale fault divided out, an axis fault's channel left
 out and the FRFs computed again), so labels, K and c come from good data. Real
@@ -243,9 +244,10 @@ def _row(s: ShapeSet, j: int, axis: np.ndarray | None) -> np.ndarray:
     return axis @ rigid_body_map(s.positions_m[j])
 
 
-def _loo_prediction(s: ShapeSet, j: int, row: np.ndarray) -> np.ndarray | None:
-    """Channel j's reading of every mode (``row`` . q) with q fitted from the other channels; None if undetermined."""
-    others = np.delete(np.arange(len(s.channels)), j)
+def _loo_prediction(s: ShapeSet, j: int, row: np.ndarray, exclude=()) -> np.ndarray | None:
+    """Channel j's reading of every mode (``row`` . q) with q fitted from the other channels (but those of
+    ``exclude``, indices); None if they do not determine it."""
+    others = np.array([i for i in range(len(s.channels)) if i != j and i not in exclude], dtype=int)
     sub = s.sensors[others]
     if sub.size == 0:
         return None
@@ -277,8 +279,9 @@ def _corrected(sets: list[ShapeSet], name: str, factor: float, axis: np.ndarray 
     return out
 
 
-def _hypotheses(sets: list[ShapeSet], name: str):
-    """Yield (factor, axis name or None, axis vector or None) fault models of channel ``name``."""
+def _hypotheses(sets: list[ShapeSet], name: str, exclude: str | None = None):
+    """Yield (factor, axis name or None, axis vector or None) fault models of channel ``name``, predicted
+    from the other channels but ``exclude`` (a second suspect)."""
     with_it = [s for s in sets if name in s.channels]
     declared = with_it[0].directions[with_it[0].channels.index(name)]
     for axis_name, axis in [(None, None)] + list(_AXES.items()):
@@ -287,7 +290,8 @@ def _hypotheses(sets: list[ShapeSet], name: str):
         p_all, s_all = [], []
         for s in with_it:
             j = s.channels.index(name)
-            p = _loo_prediction(s, j, _row(s, j, axis))
+            skip = (s.channels.index(exclude),) if exclude in s.channels else ()
+            p = _loo_prediction(s, j, _row(s, j, axis), skip)
             if p is not None:
                 p_all.append(p)
                 s_all.append(s.shapes[:, j])
@@ -331,6 +335,13 @@ def find_sensor_faults(sets: list[ShapeSet], mass_matrix: np.ndarray | None = No
             break
         found = _best_correction(sets, res0, mass_matrix)
         if found is None:
+            if not faults and MAX_FAULTS >= 2:  # two faults at once: no single correction explains them
+                pair = _best_pair(sets, res0)
+                if pair is not None:
+                    (first, second), fixed = pair
+                    after = math.sqrt(_total(fixed)[0] / energy)
+                    faults = [replace(f, relres_before=math.sqrt(res0 / energy), relres_after=after)
+                              for f in (first, second)]
             break
         fault, sets = found
         faults.append(replace(fault, relres_before=math.sqrt(res0 / energy),
@@ -364,6 +375,32 @@ def _best_correction(sets, res0, mass_matrix):
     fault = SensorFault(name, "axis" if axis_name else "scale", factor, axis_name,
                         tuple(t[1] for t in equal[1:]), 0.0, 0.0)
     return fault, fixed
+
+
+def _best_pair(sets, res0):
+    """((SensorFault, SensorFault), corrected sets) of the two-channel correction that explains the
+    residual (each channel's factor predicted with both left out), or None."""
+    from itertools import combinations
+
+    names = sorted({c for s in sets for c in s.channels})
+    best = None
+    for a, b in combinations(names, 2):
+        for fa, axa_name, axa in _hypotheses(sets, a, exclude=b):
+            if not _significant_fault(fa, axa_name):
+                continue
+            once = _corrected(sets, a, fa, axa)
+            for fb, axb_name, axb in _hypotheses(sets, b, exclude=a):
+                if not _significant_fault(fb, axb_name):
+                    continue
+                fixed = _corrected(once, b, fb, axb)
+                res = _total(fixed)[0]
+                if best is None or res < best[0]:
+                    best = (res, (a, fa, axa_name), (b, fb, axb_name), fixed)
+    if best is None or best[0] * FAULT_MIN_IMPROVEMENT > res0:
+        return None
+    res, *pair, fixed = best
+    faults = tuple(SensorFault(n, "axis" if ax else "scale", f, ax, (), 0.0, 0.0) for n, f, ax in pair)
+    return faults, fixed
 
 
 def _physical_choice(equal: list, mass_matrix) -> list:
@@ -585,7 +622,12 @@ def mass_warnings(modes, sets: list[ShapeSet], mass_matrix: np.ndarray, mass_kg:
             continue
         q, *_ = np.linalg.lstsq(s.sensors, s.shapes[k], rcond=1e-10)
         ratio = modal_mass_ratio(q, s.driving, mass_matrix)
-        if ratio is None or ratio <= 0 or 1 / MASS_TOLERANCE <= ratio <= MASS_TOLERANCE:
+        if ratio is not None and ratio < 0:
+            out.append(f"mode {m.label} at {m.frequency_hz:.1f} Hz: the driving-point residue is negative (the "
+                       f"carriage moves against the hammer): the force's sign or run '{m.run}''s "
+                       "excitation_direction is reversed")
+            continue
+        if ratio is None or ratio == 0 or 1 / MASS_TOLERANCE <= ratio <= MASS_TOLERANCE:
             continue
         out.append(f"mode {m.label} at {m.frequency_hz:.1f} Hz: modal mass from the driving-point residue "
                    f"{ratio * mass_kg:.3g} kg against the guide's M = {mass_kg:g} kg ({scale_factor_hint(ratio)})")

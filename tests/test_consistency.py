@@ -183,6 +183,17 @@ def test_fault_found_and_clean_silent_at_thirty_times_the_noise(tmp_path):
     assert flipped.parameters["f_V"]["value"] == pytest.approx(clean.parameters["f_V"]["value"], rel=1e-6)
 
 
+def test_two_faulty_channels_at_once(tmp_path, simulated):
+    """No single correction explains two faults; the pair search (both left out of the prediction) does."""
+    data, truth = simulated
+    result, _ = _identify(tmp_path, _edit(_edit(data, "acc_B_y", -1.0), "acc_D_x", G))
+    got = {f.channel: f.factor for f in result.sensor_faults}
+    assert set(got) == {"acc_B_y", "acc_D_x"}
+    assert got["acc_B_y"] == pytest.approx(-1.0, rel=0.01) and got["acc_D_x"] == pytest.approx(G, rel=0.01)
+    assert result.gate is None
+    _accurate(result, truth)
+
+
 def test_corrected_channel_gives_the_clean_file_numbers_jackknife_included(tmp_path, simulated):
     """The refit runs on the FRFs with the x1000 channel divided out, group sums too: f, zeta and their
     jackknife std are those of the clean recording (to rounding), not merely close to the truth."""
