@@ -624,8 +624,8 @@ def mass_warnings(modes, sets: list[ShapeSet], mass_matrix: np.ndarray, mass_kg:
         ratio = modal_mass_ratio(q, s.driving, mass_matrix)
         if ratio is not None and ratio < 0:
             out.append(f"mode {m.label} at {m.frequency_hz:.1f} Hz: the driving-point residue is negative (the "
-                       f"carriage moves against the hammer): the force's sign or run '{m.run}''s "
-                       "excitation_direction is reversed")
+                       f"carriage moves against the hammer in run '{m.run}'): the excitation_direction or every "
+                       "accelerometer's direction is reversed")
             continue
         if ratio is None or ratio == 0 or 1 / MASS_TOLERANCE <= ratio <= MASS_TOLERANCE:
             continue

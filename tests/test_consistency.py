@@ -307,6 +307,21 @@ def test_accelerations_in_m_s2_declared_as_g_are_named(tmp_path, simulated):
     assert kg == pytest.approx(2.2 / G, rel=0.05)
 
 
+def test_every_accelerometer_reversed_gives_a_negative_driving_point(tmp_path, simulated):
+    """All responses negated keep the shapes rigid (no channel fault), but the carriage then moves against the
+    hammer at the driving point, which no structure does."""
+    data, _ = simulated
+    runs = []
+    for run in _edit(data).runs:
+        d = np.array(run.data)
+        d[..., [i for i, n in enumerate(run.channel_names) if n != "force"]] *= -1
+        runs.append(replace(run, data=d))
+    result, _ = _identify(tmp_path, replace(data, runs=tuple(runs)))
+    assert result.sensor_faults == () and result.gate is None
+    negative = [w for w in result.warnings if "driving-point residue is negative" in w]
+    assert [w.split()[1] for w in negative] == ["roll_low", "vertical"]
+
+
 def test_modal_mass_hint_words():
     assert "another structure" in cons.scale_factor_hint(40.0)
     assert cons.scale_factor_hint(1 / 1000).startswith("factor 1000: force reads 1000x low")
