@@ -57,10 +57,15 @@ FAULT_CASES = [
     ("acc_D_y x10", "acc_D_y", 10.0, None),
     ("acc_A_y reads z", "acc_A_y", 1.0, "acc_A_z"),
     ("acc_B_x reads y", "acc_B_x", 1.0, "acc_B_y"),
+    ("acc_B_y sign + acc_D_x x9.81", ("acc_B_y", "acc_D_x"), (-1.0, G), None),
 ]
 
 
 def _edit(data, channel=None, factor=1.0, take_from=None):
+    if isinstance(channel, tuple):  # several channels, one factor each
+        for ch, fac in zip(channel, factor):
+            data = _edit(data, ch, fac)
+        return data
     runs = []
     for run in data.runs:
         names = list(run.channel_names)
