@@ -244,6 +244,9 @@ def identify_cmd(files, guide_name, estimator, as_json, csv_path, summary_path, 
         else:
             data = result.to_dict()
             rows.append(result.summary_row())
+            if result.gate is not None:  # modes reported, joint parameters withheld: identification failed
+                click.echo(f"guidefit: identification rejected: {path}: {result.gate}", err=True)
+                code = max(code, 1)
             if plot_path:
                 target = plot_path if len(files) == 1 else str(
                     Path(plot_path).with_stem(f"{Path(plot_path).stem}_{Path(path).stem}"))
@@ -262,7 +265,8 @@ def identify_cmd(files, guide_name, estimator, as_json, csv_path, summary_path, 
         if as_json:
             click.echo(report.dump_json(data))
         worst = max(worst, code)
-        outcomes.append((str(path), violations, error))
+        gated = [f"identification rejected: {result.gate}"] if result is not None and result.gate else []
+        outcomes.append((str(path), violations + gated, error))
     for target in filter(None, {csv_path, summary_path}):
         report.write_summary_csv(rows, target)
     if junit_path:
@@ -287,7 +291,7 @@ def _failed_json(path, guide_name, code, error) -> dict:
         except Exception:  # noqa: BLE001 - unreadable file: the guide is unknown
             guide = None
     return {"file": str(path), "guide": guide, "parameters": joint_parameters(1.0, {}), "modes": [],
-            "warnings": [error], "error": error, "exit_code": code}
+            "warnings": [error], "error": error, "exit_code": code, "gate": None, "sensor_faults": []}
 
 
 def _map_files(files, guide_name, settings, jobs, console):

@@ -153,6 +153,8 @@ class Identification:
     failed_run_hits: tuple = ()  # hit rows of runs that gave no FRF (every hit rejected)
     hits_checked: bool = True  # False: identified from an FRF file (no time data, no hit checks)
     modal: object = field(default=None, repr=False, compare=False)  # guidefit.modal_stage.ModalResult
+    gate: str | None = None  # why the modes are not those of a carriage on this guide (no joint parameters)
+    sensor_faults: tuple = ()  # guidefit.consistency.SensorFault of channels that do not fit rigid motion
 
     def hit_rows(self) -> list[dict]:
         """Every hit of every run, accepted or rejected, including runs that gave no FRF."""
@@ -178,6 +180,10 @@ class Identification:
             "force_levels": [lvl for run in self.runs for lvl in run.force_levels],
             "run_modes": self.run_modes(),
             "method": "global_fit" if self.modal is not None else "per_run",
+            "gate": self.gate,
+            "sensor_faults": [{"channel": f.channel, "kind": f.kind, "factor": f.factor, "axis": f.axis,
+                               "alternatives": list(f.alternatives), "message": f.message}
+                              for f in self.sensor_faults],
         }
 
     def run_modes(self) -> list[dict]:
@@ -214,6 +220,7 @@ class Identification:
             row[f"{name}_std_{suffix}"] = p["std"]
         row["n_warnings"] = len(self.warnings)
         row["hits_checked"] = self.hits_checked  # False: from an FRF file
+        row["gate"] = self.gate
         return row
 
 
@@ -778,6 +785,14 @@ def identify(path, guide=None, settings: IdentifySettings | None = None) -> Iden
     if not runs:
         raise IdentificationError(f"{path}: no run gave an FRF ({'; '.join(warnings) or 'no hits'})")
     axes = {r.name: int(np.argmax(np.abs(r.excitation_direction))) for r in runs}
+    # sensor consistency and plausibility gate (guidefit.consistency): a channel that does not fit rigid
+    # carriage motion is named and its runs fitted again with it corrected; the gate below withholds K and c
+    from guidefit import consistency
+
+    sensors = consistency.check_sensors(runs, all_modes, recording, guide, model, settings,
+                                        refit=lambda run, frf: _fit_run(run, frf, guide, model, settings, []))
+    runs, all_modes = sensors.runs, sensors.modes
+    warnings.extend(sensors.warnings)
     modes, extras, missing = _select(all_modes, model, warnings, axes)
     if settings.jackknife:
         modes = _with_jackknife(modes, {r.name: r.frf for r in runs})
@@ -789,27 +804,72 @@ def identify(path, guide=None, settings: IdentifySettings | None = None) -> Iden
     _quality_warnings(modes, settings, warnings)
     _excitation_warnings(modes, {r.name: r.frf for r in runs}, warnings)
     params = joint_parameters(guide.mass_kg, joint)
+    gate = consistency.plausibility(modes, missing, sensors.sets, model)
+    warnings.extend(consistency.mass_warnings(modes, sensors.sets, vib.carriage_mass_matrix(
+        vib.model_from_guide(guide)), guide.mass_kg, model))
+    if gate is not None:
+        params = joint_parameters(guide.mass_kg, {})
     return Identification(str(path), guide, tuple(runs), tuple(modes), params, tuple(warnings),
-                          tuple(extras), tuple(missing), tuple(failed_rows), hits_checked=not from_frfs)
+                          tuple(extras), tuple(missing), tuple(failed_rows), hits_checked=not from_frfs,
+                          gate=gate, sensor_faults=sensors.faults)
 
 
 def _identify_global(path, source, guide, model, settings) -> Identification:
     """:func:`identify` with one modal model of all runs (:func:`guidefit.modal_stage.identify_frfs`).
 
     ``source`` is a recording, or an FRF file (:class:`~guidefit.io.frf_files.FrfFile`: no hit checks).
+    The global shapes are checked for sensors that do not fit rigid carriage motion
+    (:mod:`guidefit.consistency`): a faulty channel is named, its FRFs corrected (a scale
+    divided out, a wrong axis left out) and the global fit made again; the plausibility gate
+    then withholds K and c when the modes are not those of a carriage on this guide.
     """
-    from dataclasses import replace
-
-    from guidefit import modal_stage
+    from guidefit import consistency
     from guidefit.io.frf_files import FrfFile
 
     warnings: list[str] = []
     failed_rows: list[dict] = []
     from_frfs = isinstance(source, FrfFile)
+    recording = source.recording if from_frfs else source
     collected = list(file_frfs(source, settings, warnings) if from_frfs
                      else run_frfs(source, settings, warnings, failed_rows))
     if not collected:
         raise IdentificationError(f"{path}: no run gave an FRF ({'; '.join(warnings) or 'no hits'})")
+    first = list(warnings)
+    res, runs = _global_pass(collected, guide, model, settings, first)
+    check = consistency.check_global(runs, recording, guide, settings)
+    if check.faults:  # the fit again without the faults; the first pass's warnings are dropped with it
+        collected = consistency.corrected_runs(collected, check.faults, settings, recompute=not from_frfs)
+        res, runs = _global_pass(collected, guide, model, settings, warnings)
+        check = consistency.check_global(runs, recording, guide, settings, faults=check.faults)
+    else:
+        warnings = first
+    warnings.extend(f.message for f in check.faults)
+    modes = res.modes if res is not None else []
+    joint = {k: next((m for m in modes if m.label == lab), None) for k, lab in JOINT_LABELS.items()}
+    if joint["V"] is None and joint["H"] is None:
+        why = [w for w in warnings if " hit " not in w.split(":", 1)[0]]
+        raise IdentificationError(f"{path}: neither the vertical nor the horizontal joint mode was found"
+                                  + (f" ({'; '.join(why)})" if why else ""))
+    frf_by_run = {r.name: r.frf for r in runs}
+    _quality_warnings(modes, settings, warnings)
+    _excitation_warnings(modes, frf_by_run, warnings)
+    params = joint_parameters(guide.mass_kg, joint)
+    gate = consistency.plausibility(modes, res.missing, check.sets, model)
+    warnings.extend(consistency.global_mass_warnings(runs, check.sets, guide, model))
+    if gate is not None:
+        params = joint_parameters(guide.mass_kg, {})
+    return Identification(str(path), guide, tuple(runs), tuple(modes), params, tuple(warnings),
+                          tuple(res.extras), tuple(res.missing), tuple(failed_rows), hits_checked=not from_frfs,
+                          modal=res, gate=gate, sensor_faults=check.faults)
+
+
+def _global_pass(collected, guide, model, settings, warnings: list):
+    """One global fit of the (run, FrfSet, hit rows) triples: the ModalResult (None when it failed,
+    the reason in ``warnings``) and each run's RunResult with its views of the shared modes."""
+    from dataclasses import replace
+
+    from guidefit import modal_stage
+
     frf_by_run = {run.name: frf for run, frf, _ in collected}
     geometry = {run.name: modal_stage.geometry_of(run, frf) for run, frf, _ in collected}
     try:
@@ -829,18 +889,7 @@ def _identify_global(path, source, guide, model, settings) -> Identification:
         levels = _force_levels(run, frf, rows, views, settings, warnings) if settings.force_levels and views else []
         runs.append(RunResult(run.name, frf, rows, views, tuple(run.excitation_direction),
                               frf_channels(run, frf), levels))
-    modes = res.modes if res is not None else []
-    joint = {k: next((m for m in modes if m.label == lab), None) for k, lab in JOINT_LABELS.items()}
-    if joint["V"] is None and joint["H"] is None:
-        why = [w for w in warnings if " hit " not in w.split(":", 1)[0]]
-        raise IdentificationError(f"{path}: neither the vertical nor the horizontal joint mode was found"
-                                  + (f" ({'; '.join(why)})" if why else ""))
-    _quality_warnings(modes, settings, warnings)
-    _excitation_warnings(modes, frf_by_run, warnings)
-    params = joint_parameters(guide.mass_kg, joint)
-    return Identification(str(path), guide, tuple(runs), tuple(modes), params, tuple(warnings),
-                          tuple(res.extras), tuple(res.missing), tuple(failed_rows), hits_checked=not from_frfs,
-                          modal=res)
+    return res, runs
 
 
 def frf_of_recording(path, settings: IdentifySettings | None = None):

@@ -211,10 +211,17 @@ def render_identification(result, console=None) -> None:
     eqs = {"f_V": "|p|/2pi, curve fit", "f_H": "|p|/2pi, curve fit", "K_V": "Eq. (24)", "K_H": "Eq. (25)",
            "zeta_V": "curve fit (Eq. 26 beside)", "zeta_H": "curve fit (Eq. 28 beside)",
            "c_V": "Eq. (27)", "c_H": "Eq. (29)"}
-    for name in _PARAM_ORDER:
-        p = result.parameters[name]
-        table.add_row(name, _pm(p["value"], p["std"], p["unit"]), eqs[name])
-    console.print(table)
+    gate = getattr(result, "gate", None)
+    if gate is None:
+        for name in _PARAM_ORDER:
+            p = result.parameters[name]
+            table.add_row(name, _pm(p["value"], p["std"], p["unit"]), eqs[name])
+        console.print(table)
+    else:  # the plausibility gate: modes below, no joint parameters
+        from rich.markup import escape
+
+        console.print(f"{escape(str(result.file))}  (guide {escape(result.guide.name)}): [red]no joint parameters:"
+                      f"[/red] {escape(gate)}", markup=True, highlight=False, soft_wrap=True)
     from rich import box
 
     kind = "global fit of all runs" if getattr(result, "modal", None) is not None else "curve fit"
@@ -394,7 +401,8 @@ def render_batch_summary(rows: list[dict], outcomes: list, console=None) -> None
     for col in ("file", "K_V (N/m)", "K_H (N/m)", "c_V (N s/m)", "c_H (N s/m)", "outcome"):
         table.add_column(col)
     for row, (_, violations, error) in zip(rows, outcomes):
-        outcome = "error" if error else ("out of tolerance" if violations else "ok")
+        outcome = "rejected" if row.get("gate") else "error" if error else (
+            "out of tolerance" if violations else "ok")
         table.add_row(row["file"], fmt(row.get("K_V_n_per_m")), fmt(row.get("K_H_n_per_m")),
                       fmt(row.get("c_V_ns_per_m")), fmt(row.get("c_H_ns_per_m")), outcome)
     console.print(table)
