@@ -107,6 +107,25 @@ def _parse_load(text: str | None):
     return values
 
 
+def _guide_file(name):
+    """The guide TOML a ``--guide`` names (an input of the command), None for a catalogue name."""
+    return name if name and os.path.isfile(name) else None
+
+
+def _refuse(outputs, inputs) -> None:
+    """Exit 2 (one line) before any work when an output would overwrite an input."""
+    from guidefit.outputs import refuse_inputs
+
+    refuse_inputs(outputs, inputs)
+
+
+def _written(path):
+    """Context manager: a temporary path beside ``path``, renamed onto it when complete."""
+    from guidefit.outputs import replacing
+
+    return replacing(path)
+
+
 @main.command()
 def guides():
     """List the built-in guide catalogue."""
@@ -134,6 +153,7 @@ def predict(guide_name, load_text, sweep, calibration, as_json, plot_path):
     from guidefit.predict import predict as run_predict
     from guidefit.predict import predict_sweep
 
+    _refuse([plot_path], [_guide_file(guide_name)])
     guide = load_guide(guide_name)
     load = _parse_load(load_text)
     if sweep:
@@ -226,6 +246,12 @@ def identify_cmd(files, guide_name, estimator, as_json, csv_path, summary_path, 
     from guidefit import report
     from guidefit.identify import IdentifySettings
 
+    plot_targets = {}
+    if plot_path:
+        plot_targets = {path: plot_path if len(files) == 1 else str(
+            Path(plot_path).with_stem(f"{Path(plot_path).stem}_{Path(path).stem}")) for path in files}
+    _refuse([csv_path, summary_path, junit_path, *plot_targets.values()],
+            [*files, check_path, _guide_file(guide_name)])
     spec = None
     if check_path:
         from guidefit.check import load_spec
@@ -245,9 +271,8 @@ def identify_cmd(files, guide_name, estimator, as_json, csv_path, summary_path, 
             data = result.to_dict()
             rows.append(result.summary_row())
             if plot_path:
-                target = plot_path if len(files) == 1 else str(
-                    Path(plot_path).with_stem(f"{Path(plot_path).stem}_{Path(path).stem}"))
-                report.plot_identification(result, target)
+                with _written(plot_targets[path]) as tmp:
+                    report.plot_identification(result, tmp)
             if not as_json:
                 report.render_identification(result, console)
         if spec is not None and result is not None:
@@ -264,11 +289,13 @@ def identify_cmd(files, guide_name, estimator, as_json, csv_path, summary_path, 
         worst = max(worst, code)
         outcomes.append((str(path), violations, error))
     for target in filter(None, {csv_path, summary_path}):
-        report.write_summary_csv(rows, target)
+        with _written(target) as tmp:
+            report.write_summary_csv(rows, tmp)
     if junit_path:
         from guidefit.check import junit_xml
 
-        junit_xml(outcomes, junit_path, time.perf_counter() - started)
+        with _written(junit_path) as tmp:
+            junit_xml(outcomes, tmp, time.perf_counter() - started)
     if len(files) > 1 and not as_json:
         report.render_batch_summary(rows, outcomes, console)
     sys.exit(worst)
@@ -356,6 +383,7 @@ def frf_cmd(recording, estimator, window_text, out_path, fft_precision):
     from guidefit import report
     from guidefit.identify import IdentifySettings, frf_of_recording
 
+    _refuse([out_path], [recording])
     settings = IdentifySettings(estimator=estimator, window=_parse_window(window_text),
                                 fft_precision=fft_precision)
     frfsets, warnings = frf_of_recording(recording, settings)
@@ -365,7 +393,8 @@ def frf_cmd(recording, estimator, window_text, out_path, fft_precision):
         from guidefit.frf_io import write_frfs
         from guidefit.recording import read_recording
 
-        write_frfs(out_path, frfsets, recording=read_recording(recording))
+        with _written(out_path) as tmp:
+            write_frfs(tmp, frfsets, recording=read_recording(recording))
         click.echo(f"FRFs of {len(frfsets)} run(s) written to {out_path}")
     else:
         report.render_frf_summary(frfsets)
@@ -389,6 +418,7 @@ def explain_cmd(recording, modes_path, guide_name, candidates, as_json, plot_pat
 
     if (recording is None) == (modes_path is None):
         raise click.UsageError("give a RECORDING or --modes FILE (one of them)")
+    _refuse([plot_path], [recording, modes_path, _guide_file(guide_name)])
     names = _candidate_names(candidates)
     settings = _identify_settings(estimator, no_jackknife, fft_precision)
     source = modes_path or recording
@@ -408,7 +438,8 @@ def explain_cmd(recording, modes_path, guide_name, candidates, as_json, plot_pat
                 raise
             raise _named_guide_error(source, exc) from None
     if plot_path:
-        report.plot_explanation_with_frf(result, plot_path, ident)
+        with _written(plot_path) as tmp:
+            report.plot_explanation_with_frf(result, tmp, ident)
     if as_json:
         click.echo(report.dump_json(result.to_dict()))
     else:
@@ -460,14 +491,16 @@ def export_cmd(results, fmt, joint, explain_paths, guide_name, element, units, a
     from guidefit import report
     from guidefit.export import export
 
+    _refuse([out_path], [results, *explain_paths, _guide_file(guide_name)])
     with report.spinner("explaining carriages", enabled=joint == "explained") as progress:
         text = export(results, fmt, joint=joint, explanations=explain_paths, guide=guide_name, element=element,
                       units=units, axis_map=axis_map, carriage_nodes=_id_list(carriage_nodes, "--carriage-node"),
                       rail_nodes=_id_list(rail_nodes, "--rail-node"), first_element=first_element,
                       id_step=id_step, n_vertical=n_vertical, n_horizontal=n_horizontal, progress=progress)
     if out_path:
-        with open(out_path, "w", encoding="utf-8") as handle:
-            handle.write(text)
+        from guidefit.outputs import write_text
+
+        write_text(out_path, text)
     else:
         click.echo(text, nl=False)
 
@@ -484,6 +517,7 @@ def report_cmd(recording, out_path, guide_name, candidates, estimator, no_jackkn
     from guidefit import report
     from guidefit.html_report import write_report
 
+    _refuse([out_path], [recording, _guide_file(guide_name)])
     settings = _identify_settings(estimator, no_jackknife, fft_precision)
     with report.spinner("identifying and explaining") as progress:
         write_report(recording, out_path, guide=guide_name, settings=settings,

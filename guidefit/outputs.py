@@ -1,0 +1,231 @@
+"""Output files written whole, never over an input, and interrupts that end cleanly.
+
+Every file guidefit writes (tables, plots, FRFs, reports, decks, recordings)
+goes through :func:`replacing`: the writer writes a temporary file in the
+destination's folder, and only a complete file is renamed onto the
+destination with :func:`os.replace`. A kill, a full disk or a file-size limit
+therefore leaves the destination as it was (or absent) and no temporary file
+behind, never a truncated file that looks complete. ``os.replace`` renames
+onto the destination's *name*: a symbolic link there is replaced by the new
+file, its target is not written through.
+
+:func:`refuse_inputs` is the guard every command runs before it starts: an
+output that is one of the command's inputs (the same path, a hard link, a
+symbolic link to it) is a one-line :class:`OutputError` (exit 2).
+
+:func:`install_interrupt_handler` is the command line's Ctrl-C: the main
+thread gets ``KeyboardInterrupt`` (the command unwinds, temporary files are
+removed, exit 130 with one line); should the process still be alive a moment
+later (a C call that does not return, an exit handler waiting on a worker),
+a watchdog thread removes the pending temporary files, kills the registered
+worker processes, says ``guidefit: interrupted`` and ends the process.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import sys
+import threading
+from pathlib import Path
+
+from guidefit.errors import GuidefitError
+
+__all__ = ["OutputError", "refuse_inputs", "replacing", "write_text", "write_bytes",
+           "install_interrupt_handler", "register_children", "interrupted_exit", "INTERRUPT_GRACE_S"]
+
+#: Seconds between Ctrl-C and the watchdog ending a process that has not ended by itself.
+INTERRUPT_GRACE_S = 0.6
+
+_PENDING: set[str] = set()  # temporary files being written (removed by the interrupt watchdog)
+_CHILDREN: set[int] = set()  # worker processes the interrupt watchdog kills
+_LOCK = threading.Lock()
+_SAID = threading.Event()  # "guidefit: interrupted" written (once per process)
+
+
+class OutputError(GuidefitError, ValueError):
+    """An output cannot be written where asked (it is an input, or its folder is missing)."""
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:  # one of them does not exist (or cannot be inspected): compare names
+        return os.path.abspath(a) == os.path.abspath(b)
+
+
+def refuse_inputs(outputs, inputs) -> None:
+    """Raise :class:`OutputError` when an output is one of the inputs.
+
+    ``outputs`` and ``inputs`` are paths (``None`` entries are ignored). Same
+    file means the same inode (:func:`os.path.samefile`: hard links and
+    symbolic links to an input count), or the same absolute name.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     rec = pathlib.Path(folder) / "rec.h5"
+    ...     _ = rec.write_bytes(b"x")
+    ...     refuse_inputs([pathlib.Path(folder) / "out.csv"], [rec])   # fine
+    ...     try:
+    ...         refuse_inputs([rec], [rec])
+    ...     except OutputError as exc:
+    ...         print(str(exc).split(": ", 1)[1])
+    is an input of this command; choose another output file
+    """
+    ins = [Path(p) for p in inputs if p is not None]
+    for out in (Path(p) for p in outputs if p is not None):
+        for src in ins:
+            if _same_file(out, src):
+                raise OutputError(f"{out}: is an input of this command ({src}); choose another output file")
+
+
+def _temp_name(p: Path) -> tuple[int, Path]:
+    """A new temporary file beside ``p`` with the same suffix (writers choose formats by suffix)."""
+    import tempfile
+
+    folder = p.parent if str(p.parent) else Path(".")
+    if not folder.is_dir():
+        raise OutputError(f"{p}: folder '{folder}' does not exist")
+    fd, name = tempfile.mkstemp(prefix=f".{p.name}.", suffix=f".tmp{p.suffix}", dir=folder)
+    return fd, Path(name)
+
+
+@contextlib.contextmanager
+def replacing(path):
+    """Context manager: a temporary path to write, renamed onto ``path`` when the block ends.
+
+    The temporary file is in the same folder (so the rename is atomic) and has
+    the same suffix. On any exception (interrupt included) it is removed and
+    ``path`` is untouched. The new file gets the permissions ``open()`` would
+    give it (``0o666`` less the umask).
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     out = pathlib.Path(folder) / "table.csv"
+    ...     with replacing(out) as tmp:
+    ...         _ = tmp.write_text("a,b\\n1,2\\n")
+    ...     print(out.read_text().splitlines(), sorted(q.name for q in out.parent.iterdir()))
+    ['a,b', '1,2'] ['table.csv']
+    """
+    p = Path(path)
+    fd, tmp = _temp_name(p)
+    os.close(fd)
+    with _LOCK:
+        _PENDING.add(str(tmp))
+    try:
+        yield tmp
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)  # as open() would have made it, not mkstemp's 0600
+        os.replace(tmp, p)
+    finally:
+        with _LOCK:
+            _PENDING.discard(str(tmp))
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+
+
+def write_bytes(path, data: bytes) -> None:
+    """Write ``data`` to ``path`` whole (:func:`replacing`)."""
+    with replacing(path) as tmp, open(tmp, "wb") as handle:
+        handle.write(data)
+
+
+def write_text(path, text: str) -> None:
+    """Write ``text`` (UTF-8) to ``path`` whole (:func:`replacing`)."""
+    write_bytes(path, text.encode("utf-8"))
+
+
+# ------------------------------------------------------------------ interrupts
+
+
+def register_children(pids) -> None:
+    """Worker processes the interrupt watchdog kills should the command not end in time."""
+    with _LOCK:
+        _CHILDREN.update(int(p) for p in pids if p)
+
+
+def _cleanup_and_say() -> None:
+    import signal
+
+    with _LOCK:
+        pending, children = list(_PENDING), list(_CHILDREN)
+    for pid in children:
+        with contextlib.suppress(OSError):
+            os.kill(pid, signal.SIGKILL)
+    for name in pending:
+        with contextlib.suppress(OSError):
+            os.unlink(name)
+    if not _SAID.is_set():
+        _SAID.set()
+        with contextlib.suppress(OSError):
+            os.write(2, b"guidefit: interrupted\n")
+
+
+def interrupted_exit() -> None:
+    """Say ``guidefit: interrupted`` (once), kill registered workers and end with 130 now.
+
+    ``os._exit``: exit handlers (a process pool joining its workers) cannot
+    make an interrupted command wait.
+    """
+    with contextlib.suppress(Exception):
+        sys.stdout.flush()
+    _cleanup_and_say()
+    os._exit(130)
+
+
+def _watchdog(read_fd: int) -> None:
+    import signal
+    import time
+
+    while True:
+        try:
+            data = os.read(read_fd, 512)
+        except OSError:
+            return
+        if not data:
+            return
+        if signal.SIGINT in data or signal.SIGTERM in data:
+            time.sleep(INTERRUPT_GRACE_S)
+            interrupted_exit()
+
+
+def _raise_interrupt(signum, frame):
+    raise KeyboardInterrupt
+
+
+def install_interrupt_handler() -> None:
+    """The command line's Ctrl-C (and SIGTERM): see the module docstring. Main thread only.
+
+    A C-level wake-up pipe (:func:`signal.set_wakeup_fd`) tells the watchdog
+    thread at once, even while the main thread is in a long C call.
+    """
+    import signal
+
+    if threading.current_thread() is not threading.main_thread():
+        return
+    read_fd, write_fd = os.pipe()
+    os.set_blocking(write_fd, False)
+    try:
+        signal.set_wakeup_fd(write_fd, warn_on_full_buffer=False)
+    except (ValueError, OSError):
+        os.close(read_fd)
+        os.close(write_fd)
+        return
+    signal.signal(signal.SIGINT, _raise_interrupt)
+    signal.signal(signal.SIGTERM, _raise_interrupt)
+    threading.Thread(target=_watchdog, args=(read_fd,), name="guidefit-interrupt", daemon=True).start()
+
+
+def quiet_worker() -> None:
+    """Initializer of worker processes: Ctrl-C is the parent's to handle (no tracebacks from workers)."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    with contextlib.suppress(ValueError, OSError):
+        signal.set_wakeup_fd(-1)
