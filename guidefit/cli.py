@@ -24,10 +24,16 @@ class _Group(click.Group):
 
     def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
         """Usage errors (bad option, missing argument, unknown command) as one line, exit 2."""
+        import warnings
+
+        from guidefit.outputs import one_line_warning
+
         if not standalone_mode:
             return super().main(args, prog_name, complete_var, standalone_mode, **extra)
         try:
-            code = super().main(args, prog_name, complete_var, False, **extra)
+            with warnings.catch_warnings():  # Python's warning text (file, line, source) is not for the user
+                warnings.showwarning = one_line_warning
+                code = super().main(args, prog_name, complete_var, False, **extra)
         except _NO_ARGS_IS_HELP as exc:  # bare `guidefit`: the help text, as click shows it
             exc.show()
             sys.exit(exc.exit_code)
@@ -39,7 +45,9 @@ class _Group(click.Group):
         except click.ClickException as exc:
             click.echo(f"guidefit: error: {' '.join(exc.format_message().split())}", err=True)
             sys.exit(exc.exit_code)
-        except click.exceptions.Abort:
+        except click.exceptions.Abort as exc:
+            if isinstance(exc.__context__, KeyboardInterrupt):
+                _interrupted()
             click.echo("guidefit: aborted", err=True)
             sys.exit(1)
         sys.exit(code if isinstance(code, int) else 0)
@@ -57,8 +65,10 @@ class _Group(click.Group):
             click.echo(f"guidefit: error: {where}{exc.strerror or exc}", err=True)
             sys.exit(2)
         except KeyboardInterrupt:
-            click.echo("guidefit: interrupted", err=True)
-            sys.exit(130)
+            _interrupted()
+        except RecursionError:  # a nested document deeper than any real input (readers say it where they can)
+            click.echo("guidefit: error: input nested too deeply to read (recursion limit)", err=True)
+            sys.exit(2)
         except (click.exceptions.Exit, click.ClickException, SystemExit):
             raise
         except Exception as exc:  # noqa: BLE001 - a bug of guidefit: still one line, never a traceback
@@ -71,6 +81,16 @@ class _Group(click.Group):
             click.echo(f"guidefit: internal error: {type(exc).__name__}: {exc}{where} "
                        "(please report this with the input file)", err=True)
             sys.exit(1)
+
+
+def _interrupted():
+    """Ctrl-C: one line, exit 130; in the guidefit program at once (no exit handler may wait)."""
+    from guidefit.outputs import handler_installed, interrupted_exit
+
+    if handler_installed():
+        interrupted_exit()
+    click.echo("guidefit: interrupted", err=True)
+    sys.exit(130)
 
 
 @click.group(cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})
@@ -330,18 +350,46 @@ def _map_files(files, guide_name, settings, jobs, console):
                     progress.advance()
                 yield path, outcome
             return
-        from concurrent.futures import ProcessPoolExecutor
-
-        with ProcessPoolExecutor(max_workers=jobs) as pool:
-            futures = [pool.submit(_identify_one, path, guide_name, settings) for path in files]
-            for path, future in zip(files, futures):
-                outcome = future.result()
-                if progress:
-                    progress.advance()
-                yield path, outcome
+        yield from _pool_map(files, guide_name, settings, jobs, progress)
     finally:
         if progress:
             progress.close()
+
+
+def _pool_map(files, guide_name, settings, jobs, progress):
+    """``_identify_one`` over ``files`` in ``jobs`` worker processes, results in input order.
+
+    Ctrl-C is the parent's: workers ignore SIGINT (blocked while they are forked, ignored by
+    their initializer), and on an interrupt or an error the workers are killed, never waited
+    for (a worker in the middle of a file would hold the exit for its whole run).
+    """
+    import signal
+    from concurrent.futures import ProcessPoolExecutor
+
+    from guidefit.outputs import quiet_worker, register_children
+
+    pool = ProcessPoolExecutor(max_workers=jobs, initializer=quiet_worker)
+    done = False
+    try:
+        old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        try:  # the workers are forked here (a SIGINT now waits for the unblock below)
+            futures = [pool.submit(_identify_one, path, guide_name, settings) for path in files]
+            register_children(getattr(pool, "_processes", None) or {})
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, old)
+        for path, future in zip(files, futures):
+            outcome = future.result()
+            if progress:
+                progress.advance()
+            yield path, outcome
+        done = True
+    finally:
+        if done:
+            pool.shutdown(wait=True)
+        else:
+            for process in list((getattr(pool, "_processes", None) or {}).values()):
+                process.kill()
+            pool.shutdown(wait=False, cancel_futures=True)
 
 
 def _parse_window(text: str | None):

@@ -32,15 +32,17 @@ from pathlib import Path
 from guidefit.errors import GuidefitError
 
 __all__ = ["OutputError", "refuse_inputs", "replacing", "write_text", "write_bytes",
-           "install_interrupt_handler", "register_children", "interrupted_exit", "INTERRUPT_GRACE_S"]
+           "install_interrupt_handler", "handler_installed", "register_children", "interrupted_exit",
+           "quiet_worker", "quiet_unraisable", "one_line_warning", "INTERRUPT_GRACE_S"]
 
 #: Seconds between Ctrl-C and the watchdog ending a process that has not ended by itself.
-INTERRUPT_GRACE_S = 0.6
+INTERRUPT_GRACE_S = 0.3
 
 _PENDING: set[str] = set()  # temporary files being written (removed by the interrupt watchdog)
 _CHILDREN: set[int] = set()  # worker processes the interrupt watchdog kills
 _LOCK = threading.Lock()
 _SAID = threading.Event()  # "guidefit: interrupted" written (once per process)
+_INSTALLED = threading.Event()  # install_interrupt_handler ran (the guidefit program)
 
 
 class OutputError(GuidefitError, ValueError):
@@ -157,6 +159,12 @@ def _cleanup_and_say() -> None:
     for pid in children:
         with contextlib.suppress(OSError):
             os.kill(pid, signal.SIGKILL)
+    for pid in children:  # reaped here: where nothing reaps orphans they would stay as zombies
+        with contextlib.suppress(OSError):
+            os.waitpid(pid, 0)
+    with contextlib.suppress(OSError):
+        while os.waitpid(-1, os.WNOHANG)[0]:  # children that have already ended (forked readers)
+            pass
     for name in pending:
         with contextlib.suppress(OSError):
             os.unlink(name)
@@ -182,6 +190,7 @@ def _watchdog(read_fd: int) -> None:
     import signal
     import time
 
+    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})  # signals go to the main thread
     while True:
         try:
             data = os.read(read_fd, 512)
@@ -189,7 +198,7 @@ def _watchdog(read_fd: int) -> None:
             return
         if not data:
             return
-        if signal.SIGINT in data or signal.SIGTERM in data:
+        if signal.SIGINT in data:
             time.sleep(INTERRUPT_GRACE_S)
             interrupted_exit()
 
@@ -199,7 +208,7 @@ def _raise_interrupt(signum, frame):
 
 
 def install_interrupt_handler() -> None:
-    """The command line's Ctrl-C (and SIGTERM): see the module docstring. Main thread only.
+    """The command line's Ctrl-C: see the module docstring. Main thread only.
 
     A C-level wake-up pipe (:func:`signal.set_wakeup_fd`) tells the watchdog
     thread at once, even while the main thread is in a long C call.
@@ -217,7 +226,7 @@ def install_interrupt_handler() -> None:
         os.close(write_fd)
         return
     signal.signal(signal.SIGINT, _raise_interrupt)
-    signal.signal(signal.SIGTERM, _raise_interrupt)
+    _INSTALLED.set()
     threading.Thread(target=_watchdog, args=(read_fd,), name="guidefit-interrupt", daemon=True).start()
 
 
@@ -226,6 +235,35 @@ def quiet_worker() -> None:
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
     with contextlib.suppress(ValueError, OSError):
         signal.set_wakeup_fd(-1)
+
+
+def handler_installed() -> bool:
+    """True in the ``guidefit`` program (:func:`install_interrupt_handler` ran), not under a test runner."""
+    return _INSTALLED.is_set()
+
+
+def quiet_unraisable(unraisable) -> None:
+    """``sys.unraisablehook`` of the program: a failure while an object is freed after the error
+    was reported (h5py closing a file on a full disk, a generator closed by Ctrl-C) adds no
+    traceback; the command's own message has said what went wrong."""
+
+
+def one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """``warnings.showwarning`` of the command line: ``guidefit: warning: <text> (<category>)``.
+
+    Python's form (file path, line number, source line) is not for the user.
+
+    Examples
+    --------
+    >>> import io
+    >>> out = io.StringIO()
+    >>> one_line_warning(RuntimeWarning("invalid value\\nencountered"), RuntimeWarning, "/x/y.py", 3, out)
+    >>> out.getvalue()
+    'guidefit: warning: invalid value encountered (RuntimeWarning)\\n'
+    """
+    text = " ".join(str(message).split()) or category.__name__
+    target = sys.stderr if file is None else file
+    with contextlib.suppress(Exception):
+        target.write(f"guidefit: warning: {text} ({category.__name__})\n")
