@@ -161,24 +161,38 @@ def guides():
 @click.option("--load", "load_text", metavar="FV,FH,M",
               help="Static load: vertical force N (positive presses the carriage onto the rail), "
                    "lateral force N, roll moment N m.")
-@click.option("--sweep", is_flag=True, help="Static stiffness and frequencies over a load range.")
+@click.option("--sweep", "sweep_text", is_flag=False, flag_value="auto", default=None, metavar="[Q:FROM:TO:N]",
+              help="Stiffness and frequencies over a load range: Q (FV, FH in N; M in N m) from FROM to TO in "
+                   "N loads, the other components from --load, e.g. --sweep FV:0:5000:21. Bare --sweep: "
+                   "0 to --load in 21 steps, or F_V from 0 to 90 % of lift-off.")
 @click.option("--calibration", type=click.Choice(["nominal", "law"]), default="nominal", show_default=True,
               help="Roller stiffness: the guide's nominal K_n, or the contact law's own value.")
-@click.option("--json", "as_json", is_flag=True, help="Print machine-readable JSON.")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON document.")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), help="Write a PNG plot.")
-def predict(guide_name, load_text, sweep, calibration, as_json, plot_path):
-    """Analytic stiffness (Eq. 1-4) and natural frequencies (Eq. 5-23) of a guide."""
+def predict(guide_name, load_text, sweep_text, calibration, as_json, plot_path):
+    """Analytic stiffness (Eq. 1-4) and natural frequencies (Eq. 5-23) of a guide.
+
+    Three stiffnesses, each named: the static tangent at zero load, the static tangent at
+    the given load, and the apparent single-DOF value 4 pi^2 M f^2 that identify would report.
+    """
     from guidefit import report
     from guidefit.model.guides import load_guide
+    from guidefit.predict import parse_sweep, predict_sweep
     from guidefit.predict import predict as run_predict
-    from guidefit.predict import predict_sweep
 
     _refuse([plot_path], [_guide_file(guide_name)])
+    sweep = None
+    if sweep_text not in (None, "auto"):
+        try:
+            sweep = parse_sweep(sweep_text)
+        except ValueError as exc:
+            raise click.BadParameter(str(exc), param_hint="--sweep") from None
     guide = load_guide(guide_name)
     load = _parse_load(load_text)
-    if sweep:
-        frame = predict_sweep(guide, calibration=calibration, direction_load=load)
-        report.render_sweep(frame, as_json=as_json, plot_path=plot_path)
+    if sweep_text is not None:
+        frame = predict_sweep(guide, calibration=calibration, direction_load=load, sweep=sweep)
+        report.render_sweep(frame, as_json=as_json, plot_path=plot_path, guide_name=guide.name,
+                            calibration=calibration)
         return
     result = run_predict(guide, load=load, calibration=calibration)
     report.render_prediction(result, as_json=as_json, plot_path=plot_path)
