@@ -73,8 +73,8 @@ def refuse_inputs(outputs, inputs) -> None:
     ...     try:
     ...         refuse_inputs([rec], [rec])
     ...     except OutputError as exc:
-    ...         print(str(exc).split(": ", 1)[1])
-    is an input of this command; choose another output file
+    ...         print(str(exc).split(": ", 1)[1].split(" (")[0])
+    is an input of this command
     """
     ins = [Path(p) for p in inputs if p is not None]
     for out in (Path(p) for p in outputs if p is not None):

@@ -91,7 +91,7 @@ def test_identify_jobs_2_ends_at_once_with_one_line(recordings, tmp_path):
     ["frf", "{0}", "--out", "frf.csv"],
     ["explain", "{0}", "--no-jackknife"],
     ["simulate", "--out", "sim.h5", "--hits", 60],
-    ["predict", "--sweep", "FV:0:4000:41"],
+    ["predict", "--sweep", "FV:0:900:61"],
 ], ids=lambda a: a[0])
 def test_any_command_ends_at_once_with_one_line(recordings, tmp_path, args):
     args = [str(a).format(*recordings) for a in args]
