@@ -9,18 +9,36 @@ users) leaves the process's signal handling as it is.
 
 def run() -> None:
     """The ``guidefit`` program."""
+    import os
     import sys
 
     from guidefit import outputs
 
     outputs.install_interrupt_handler()
     try:
+        # A failure while an object is freed after the error was reported (h5py closing a file
+        # on a full disk, a generator closed by Ctrl-C) adds no traceback: the command's own
+        # line has said what went wrong.
         sys.unraisablehook = outputs.quiet_unraisable
+        sys.excepthook = outputs.quiet_unraisable
         from guidefit.cli import main
 
         main()
     except KeyboardInterrupt:
         outputs.interrupted_exit()
+    except SystemExit as exc:
+        code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+        if code == 0:
+            raise
+        # A failed command ends here without tearing the interpreter down: the error it reported
+        # may hold h5py objects of a file whose write failed (full disk, file-size limit), and
+        # freeing those crashes libhdf5 (segfault). Nothing is left to flush but the streams.
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except Exception:  # noqa: BLE001 - a closed pipe: nothing more to say
+                pass
+        os._exit(code)
     finally:  # the command has ended: a Ctrl-C while the interpreter shuts down changes nothing
         import signal
 

@@ -119,7 +119,13 @@ def replacing(path):
     with _LOCK:
         _PENDING.add(str(tmp))
     try:
-        yield tmp
+        try:
+            yield tmp
+        except (OSError, RuntimeError) as exc:
+            reason = _write_failure(exc)
+            if reason is None:
+                raise
+            raise OutputError(f"{p}: cannot write ({reason})") from None
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)  # as open() would have made it, not mkstemp's 0600
@@ -129,6 +135,30 @@ def replacing(path):
             _PENDING.discard(str(tmp))
         with contextlib.suppress(OSError):
             tmp.unlink()
+
+
+def _write_failure(exc: BaseException) -> str | None:
+    """The reason of a failed write (full disk, file-size limit, ...), or None for another error.
+
+    h5py reports libhdf5's failures as OSError or RuntimeError with the errno in the text.
+
+    >>> _write_failure(OSError(28, "No space left on device"))
+    'No space left on device'
+    >>> _write_failure(RuntimeError("Can't decrement id ref count (unable to extend file properly, errno = 27, ...)"))
+    'File too large'
+    >>> _write_failure(OSError(2, "No such file or directory")) is None
+    True
+    """
+    import errno
+    import re
+
+    number = getattr(exc, "errno", None)
+    if number is None:
+        found = re.search(r"errno = (\d+)", str(exc))
+        number = int(found.group(1)) if found else None
+    if number in (errno.ENOSPC, errno.EFBIG, errno.EDQUOT, errno.EIO, errno.EROFS):
+        return os.strerror(number)
+    return None
 
 
 def write_bytes(path, data: bytes) -> None:
@@ -244,10 +274,11 @@ def handler_installed() -> bool:
     return _INSTALLED.is_set()
 
 
-def quiet_unraisable(unraisable) -> None:
-    """``sys.unraisablehook`` of the program: a failure while an object is freed after the error
-    was reported (h5py closing a file on a full disk, a generator closed by Ctrl-C) adds no
-    traceback; the command's own message has said what went wrong."""
+def quiet_unraisable(*args) -> None:
+    """``sys.unraisablehook`` and ``sys.excepthook`` of the program: a failure while an object
+    is freed after the error was reported (h5py closing a file on a full disk, a generator
+    closed by Ctrl-C) adds no traceback; the command's own message has said what went wrong.
+    (Every exception of a command is turned into one line by the command line itself.)"""
 
 
 def one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:

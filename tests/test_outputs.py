@@ -135,7 +135,7 @@ def test_a_symlinked_output_is_replaced_not_followed(case):
 def test_replacing_leaves_the_destination_untouched_when_the_writer_fails(tmp_path):
     out = tmp_path / "table.csv"
     out.write_text("old, complete\n")
-    with pytest.raises(OSError, match="No space"), replacing(out) as tmp:
+    with pytest.raises(OutputError, match="table.csv: cannot write .No space"), replacing(out) as tmp:
         tmp.write_text("half a ta")
         raise OSError(28, "No space left on device")
     assert out.read_text() == "old, complete\n"
@@ -210,17 +210,23 @@ def _fsize_limit(limit_bytes):
     return apply
 
 
-@pytest.mark.parametrize("suffix", ["h5", "csv"])
-def test_simulate_under_a_file_size_limit_is_one_line_exit_2(tmp_path, suffix):
-    """Was: a segfault (exit 139) and four h5py tracebacks. SIGXFSZ stays at Python's default
-    (ignored), so the write fails with EFBIG."""
-    out = tmp_path / f"sim.{suffix}"
-    proc = subprocess.run([sys.executable, "-m", "guidefit", "simulate", "--out", str(out), "--hits", "8"],
-                          capture_output=True, text=True, timeout=60, preexec_fn=_fsize_limit(100_000))
+@pytest.mark.parametrize("args", [
+    ["simulate", "--out", "sim.h5", "--hits", "8"],
+    ["simulate", "--out", "sim.csv", "--hits", "8"],
+    ["simulate", "--out", "sim.h5", "--hits", "8", "--layout", "signals"],  # HDF5 streamed block by block
+    ["frf", "{rec}", "--out", "frf.h5"],
+    ["frf", "{rec}", "--out", "frf.csv"],
+    ["predict", "--plot", "p.png"],
+], ids=lambda a: "-".join(x for x in a if not x.startswith("{")))
+def test_a_file_size_limit_is_one_line_exit_2(rec, tmp_path, args):
+    """Was: simulate segfaulted (exit 139) with four h5py tracebacks; frf .h5 was an internal error.
+    SIGXFSZ stays at Python's default (ignored), so the write fails with EFBIG."""
+    proc = subprocess.run([sys.executable, "-m", "guidefit", *(a.format(rec=rec) for a in args)], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=60, preexec_fn=_fsize_limit(20_000))
     assert proc.returncode == 2, proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1, proc.stderr
-    assert "Traceback" not in proc.stderr and "File too large" in proc.stderr
-    assert _leftovers(tmp_path, []) == []  # no truncated recording, no temporary file
+    assert "Traceback" not in proc.stderr and "cannot write (File too large)" in proc.stderr, proc.stderr
+    assert _leftovers(tmp_path, []) == []  # no truncated output, no temporary file
 
 
 # ------------------------------------------------------------- limits

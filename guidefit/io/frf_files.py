@@ -21,10 +21,20 @@ def write_frf_csv_file(path, frfsets, *, recording=None) -> None:
 
 
 def write_frf_h5_file(path, frfsets, *, recording=None) -> None:
-    """:func:`guidefit.frf.write_frf_h5` (``recording`` is not used by HDF5)."""
+    """:func:`guidefit.frf.write_frf_h5` (``recording`` is not used by HDF5).
+
+    The file is built in memory and written with one plain write: a disk write failing
+    inside libhdf5 (full disk, file-size limit) leaves h5py objects that crash the
+    interpreter when freed; a failing Python write is one OSError.
+    """
+    import io
+
     from guidefit.frf import write_frf_h5
 
-    write_frf_h5(path, frfsets)
+    image = io.BytesIO()
+    write_frf_h5(image, frfsets)
+    with open(path, "wb") as out:
+        out.write(image.getbuffer())
 
 
 FORMATS = (

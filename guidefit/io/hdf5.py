@@ -896,13 +896,18 @@ def open_signals_writer(
         if not ok and mode == "a":
             with contextlib.suppress(Exception):
                 del runs_group[run.name]
-        f.close()
-        if mode == "w":
-            if ok:
-                os.replace(target, p)
-            else:
-                with contextlib.suppress(OSError):
-                    target.unlink()
+        try:
+            f.close()
+        except BaseException:
+            ok = False  # a close that fails (full disk) leaves an incomplete file
+            raise
+        finally:
+            if mode == "w":
+                if ok:
+                    os.replace(target, p)
+                else:
+                    with contextlib.suppress(OSError):
+                        target.unlink()
 
 
 FORMATS = (
