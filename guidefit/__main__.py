@@ -21,6 +21,7 @@ def run() -> None:
         # line has said what went wrong.
         sys.unraisablehook = outputs.quiet_unraisable
         sys.excepthook = outputs.quiet_unraisable
+        outputs.one_line_logging()  # a library's logging.warning (matplotlib's font cache) as one guidefit line
         from guidefit.cli import main
 
         main()
@@ -28,6 +29,8 @@ def run() -> None:
         outputs.interrupted_exit()
     except SystemExit as exc:
         code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+        if outputs.interrupted():  # Ctrl-C came, whatever caught it on the way: 130
+            outputs.interrupted_exit()
         if code == 0:
             raise
         # A failed command ends here without tearing the interpreter down: the error it reported

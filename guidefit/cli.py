@@ -72,6 +72,10 @@ class _Group(click.Group):
         except (click.exceptions.Exit, click.ClickException, SystemExit):
             raise
         except Exception as exc:  # noqa: BLE001 - a bug of guidefit: still one line, never a traceback
+            from guidefit.outputs import interrupted
+
+            if interrupted():  # Ctrl-C broke something (an import reports it as ImportError)
+                _interrupted()
             where = ""
             tb = exc.__traceback__
             while tb is not None and tb.tb_next is not None:
@@ -219,6 +223,10 @@ def _identify_one(path, guide, settings):
     except GuidefitError as exc:
         return exc.exit_code, None, str(exc)
     except Exception as exc:  # noqa: BLE001 - a batch goes on; the file is reported
+        from guidefit.outputs import interrupted
+
+        if interrupted():  # Ctrl-C broke something (an import reports it as ImportError)
+            raise KeyboardInterrupt from None
         return 1, None, f"{path}: internal error: {type(exc).__name__}: {exc} (please report this file)"
 
 

@@ -33,7 +33,7 @@ from guidefit.errors import GuidefitError
 
 __all__ = ["OutputError", "refuse_inputs", "replacing", "write_text", "write_bytes",
            "install_interrupt_handler", "handler_installed", "register_children", "interrupted_exit",
-           "quiet_worker", "quiet_unraisable", "one_line_warning", "INTERRUPT_GRACE_S"]
+           "quiet_worker", "quiet_unraisable", "one_line_warning", "interrupted", "INTERRUPT_GRACE_S"]
 
 #: Seconds between Ctrl-C and the watchdog ending a process that has not ended by itself.
 INTERRUPT_GRACE_S = 0.3
@@ -229,11 +229,22 @@ def _watchdog(read_fd: int) -> None:
         if not data:
             return
         if signal.SIGINT in data:
+            _INTERRUPTED.set()
             time.sleep(INTERRUPT_GRACE_S)
             interrupted_exit()
 
 
+_INTERRUPTED = threading.Event()  # SIGINT received (install_interrupt_handler's handler ran)
+
+
+def interrupted() -> bool:
+    """True once Ctrl-C was received: an error seen after it (an import that the interrupt broke,
+    say, reported as ImportError) is the interrupt, not a fault of the input."""
+    return _INTERRUPTED.is_set()
+
+
 def _raise_interrupt(signum, frame):
+    _INTERRUPTED.set()
     raise KeyboardInterrupt
 
 
@@ -298,3 +309,20 @@ def one_line_warning(message, category, filename, lineno, file=None, line=None) 
     target = sys.stderr if file is None else file
     with contextlib.suppress(Exception):
         target.write(f"guidefit: warning: {text} ({category.__name__})\n")
+
+
+def one_line_logging() -> None:
+    """Library log records that reach Python's last-resort handler (warnings and errors of
+    matplotlib, h5py, ... when nobody configured logging) as ``guidefit: warning: <text>``."""
+    import logging
+
+    handler = logging.StreamHandler()
+    handler.setLevel(logging.WARNING)
+    handler.setFormatter(_OneLineFormatter())
+    logging.lastResort = handler
+
+
+class _OneLineFormatter:
+    def format(self, record) -> str:
+        text = " ".join(record.getMessage().split())
+        return f"guidefit: warning: {text} ({record.name})"
