@@ -342,6 +342,8 @@ def test_library_log_warnings_are_one_guidefit_line(monkeypatch, capsys):
     monkeypatch.setattr(logging, "lastResort", logging.lastResort)  # put back after the test
     one_line_logging()
     logging.lastResort.stream = sys.stderr  # capsys's stream
-    logging.getLogger("matplotlib.font_manager").warning("Matplotlib is building the font cache;\nwait")
+    logger = logging.getLogger("matplotlib.font_manager.test")
+    monkeypatch.setattr(logger, "propagate", False)  # as without pytest's handlers: the last resort writes
+    logger.warning("Matplotlib is building the font cache;\nwait")
     assert capsys.readouterr().err == "guidefit: warning: Matplotlib is building the font cache; wait " \
-                                      "(matplotlib.font_manager)\n"
+                                      "(matplotlib.font_manager.test)\n"
