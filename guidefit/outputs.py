@@ -156,7 +156,7 @@ def _write_failure(exc: BaseException) -> str | None:
     if number is None:
         found = re.search(r"errno = (\d+)", str(exc))
         number = int(found.group(1)) if found else None
-    if number in (errno.ENOSPC, errno.EFBIG, errno.EDQUOT, errno.EIO, errno.EROFS):
+    if number in (errno.ENOSPC, errno.EFBIG, errno.EDQUOT, errno.EROFS):
         return os.strerror(number)
     return None
 
@@ -201,7 +201,9 @@ def _cleanup_and_say() -> None:
     if not _SAID.is_set():
         _SAID.set()
         with contextlib.suppress(OSError):
-            os.write(2, b"guidefit: interrupted\n")
+            # on a terminal a progress bar may have hidden the cursor and left a partial line
+            prefix = b"\r\x1b[2K\x1b[?25h" if os.isatty(2) else b""
+            os.write(2, prefix + b"guidefit: interrupted\n")
 
 
 def interrupted_exit() -> None:
