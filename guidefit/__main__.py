@@ -10,6 +10,7 @@ users) leaves the process's signal handling as it is.
 def run() -> None:
     """The ``guidefit`` program."""
     import os
+    import signal
     import sys
 
     from guidefit import outputs
@@ -28,6 +29,7 @@ def run() -> None:
     except KeyboardInterrupt:
         outputs.interrupted_exit()
     except SystemExit as exc:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # the command has ended; ignored stays ignored
         code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
         if outputs.interrupted():  # Ctrl-C came, whatever caught it on the way: 130
             outputs.interrupted_exit()
@@ -42,10 +44,6 @@ def run() -> None:
             except Exception:  # noqa: BLE001 - a closed pipe: nothing more to say
                 pass
         os._exit(code)
-    finally:  # the command has ended: a Ctrl-C while the interpreter shuts down changes nothing
-        import signal
-
-        signal.signal(signal.SIGINT, signal.SIG_IGN)  # ignored stays ignored through finalisation
 
 
 if __name__ == "__main__":
