@@ -292,8 +292,8 @@ def identify_cmd(files, guide_name, estimator, as_json, csv_path, summary_path, 
     if plot_path:
         plot_targets = {path: plot_path if len(files) == 1 else str(
             Path(plot_path).with_stem(f"{Path(plot_path).stem}_{Path(path).stem}")) for path in files}
-    _refuse([csv_path, summary_path, junit_path, *plot_targets.values()],
-            [*files, check_path, _guide_file(guide_name)])
+    summary_paths = [csv_path] if summary_path == csv_path else [csv_path, summary_path]  # "same as --csv"
+    _refuse([*summary_paths, junit_path, *plot_targets.values()], [*files, check_path, _guide_file(guide_name)])
     spec = None
     if check_path:
         from guidefit.check import load_spec

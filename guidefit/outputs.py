@@ -57,7 +57,7 @@ def _same_file(a: Path, b: Path) -> bool:
 
 
 def refuse_inputs(outputs, inputs) -> None:
-    """Raise :class:`OutputError` when an output is one of the inputs.
+    """Raise :class:`OutputError` when an output is one of the inputs, or two outputs are one file.
 
     ``outputs`` and ``inputs`` are paths (``None`` entries are ignored). Same
     file means the same inode (:func:`os.path.samefile`: hard links and
@@ -77,10 +77,15 @@ def refuse_inputs(outputs, inputs) -> None:
     is an input of this command
     """
     ins = [Path(p) for p in inputs if p is not None]
-    for out in (Path(p) for p in outputs if p is not None):
+    outs = [Path(p) for p in outputs if p is not None]
+    for k, out in enumerate(outs):
         for src in ins:
             if _same_file(out, src):
                 raise OutputError(f"{out}: is an input of this command ({src}); choose another output file")
+        for other in outs[:k]:  # two outputs onto one file: the second would replace the first
+            if _same_file(out, other):
+                raise OutputError(f"{out}: is given for two outputs of this command ({other}); "
+                                  "choose different files")
 
 
 def _temp_name(p: Path) -> tuple[int, Path]:

@@ -110,6 +110,17 @@ def test_simulate_refuses_when_a_sidecar_would_overwrite_its_guide(tmp_path):
     assert _leftovers(tmp_path, ["sim.truth.json", "run_lateral.csv"]) == []
 
 
+def test_two_outputs_onto_one_file_are_refused(case, tmp_path):
+    other = tmp_path / "other" / "rec.h5"  # the same stem in another folder: the same --plot name
+    other.parent.mkdir()
+    other.write_bytes(case.read_bytes())
+    code, _, err = _cli("identify", case, other, "--plot", tmp_path / "p.png")
+    assert code == 2 and "given for two outputs" in err, err
+    code, _, err = _cli("identify", case, "--csv", tmp_path / "a.xml", "--junit", tmp_path / "a.xml")
+    assert code == 2 and "given for two outputs" in err, err
+    assert not list(tmp_path.glob("*.png")) and not (tmp_path / "a.xml").exists()
+
+
 def test_refuse_inputs_library_call(tmp_path):
     a = tmp_path / "a.h5"
     a.write_bytes(b"x")
