@@ -167,7 +167,7 @@ def guides():
                    "lateral force N, roll moment N m.")
 @click.option("--sweep", "sweep_text", is_flag=False, flag_value="auto", default=None, metavar="[Q:FROM:TO:N]",
               help="Stiffness and frequencies over a load range: Q (FV, FH in N; M in N m) from FROM to TO in "
-                   "N loads, the other components from --load, e.g. --sweep FV:0:5000:21. Bare --sweep: "
+                   "N loads, the other components from --load, e.g. --sweep FV:0:900:10. Bare --sweep: "
                    "0 to --load in 21 steps, or F_V from 0 to 90 % of lift-off.")
 @click.option("--calibration", type=click.Choice(["nominal", "law"]), default="nominal", show_default=True,
               help="Roller stiffness: the guide's nominal K_n, or the contact law's own value.")

@@ -143,12 +143,12 @@ def parse_sweep(text: str) -> tuple[str, float, float, int]:
     >>> parse_sweep("FV:0:5000")
     Traceback (most recent call last):
     ...
-    ValueError: 'FV:0:5000': expected QUANTITY:FROM:TO:N, e.g. FV:0:5000:21 (QUANTITY: FV, FH or M)
+    ValueError: 'FV:0:5000': expected QUANTITY:FROM:TO:N, e.g. FV:0:900:10 (QUANTITY: FV, FH or M)
     """
     import math
 
     parts = text.split(":")
-    usage = f"'{text}': expected QUANTITY:FROM:TO:N, e.g. FV:0:5000:21 (QUANTITY: FV, FH or M)"
+    usage = f"'{text}': expected QUANTITY:FROM:TO:N, e.g. FV:0:900:10 (QUANTITY: FV, FH or M)"
     if len(parts) != 4 or parts[0].strip().upper() not in SWEEP_QUANTITIES:
         raise ValueError(usage)
     try:
