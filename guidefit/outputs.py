@@ -131,15 +131,29 @@ def replacing(path):
             if reason is None:
                 raise
             raise OutputError(f"{p}: cannot write ({reason})") from None
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # as open() would have made it, not mkstemp's 0600
+        os.chmod(tmp, _mode_for(p))
         os.replace(tmp, p)
     finally:
         with _LOCK:
             _PENDING.discard(str(tmp))
         with contextlib.suppress(OSError):
             tmp.unlink()
+
+
+def _mode_for(p: Path) -> int:
+    """Permissions of the new file: those of the regular file it replaces, else what ``open()``
+    would give (0o666 less the umask), never mkstemp's 0o600."""
+    import stat
+
+    try:
+        st = os.lstat(p)
+        if stat.S_ISREG(st.st_mode):
+            return stat.S_IMODE(st.st_mode)
+    except OSError:
+        pass
+    umask = os.umask(0)
+    os.umask(umask)
+    return 0o666 & ~umask
 
 
 def _write_failure(exc: BaseException) -> str | None:

@@ -165,6 +165,9 @@ def test_replacing_gives_the_permissions_open_would(tmp_path):
     finally:
         os.umask(umask)
     assert (tmp_path / "a.txt").stat().st_mode & 0o777 == 0o644
+    os.chmod(tmp_path / "a.txt", 0o640)  # a file the user restricted keeps its permissions
+    write_text(tmp_path / "a.txt", "y")
+    assert (tmp_path / "a.txt").stat().st_mode & 0o777 == 0o640
 
 
 def _half_then_fail(real, path_at=0):
