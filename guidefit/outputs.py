@@ -105,8 +105,11 @@ def replacing(path):
 
     The temporary file is in the same folder (so the rename is atomic) and has
     the same suffix. On any exception (interrupt included) it is removed and
-    ``path`` is untouched. The new file gets the permissions ``open()`` would
-    give it (``0o666`` less the umask).
+    ``path`` is untouched. The new file keeps the permissions of the regular
+    file it replaces, or gets those ``open()`` would give it (``0o666`` less
+    the umask). A write that fails for lack of room (full disk, quota,
+    file-size limit, read-only file system) is :class:`OutputError`
+    ``"<path>: cannot write (<reason>)"``.
 
     Examples
     --------
