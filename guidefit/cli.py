@@ -298,7 +298,12 @@ def identify_cmd(files, guide_name, estimator, as_json, csv_path, summary_path, 
     if check_path:
         from guidefit.check import load_spec
 
-        spec = load_spec(check_path)
+        try:
+            spec = load_spec(check_path)
+        except RecursionError:  # tomllib reads nested arrays recursively
+            from guidefit.errors import GuidefitError
+
+            raise GuidefitError(f"{check_path}: not a tolerance spec (arrays or tables nested too deeply)") from None
     settings = IdentifySettings(estimator=estimator, jackknife=not no_jackknife, fft_precision=fft_precision)
     started = time.perf_counter()
     worst, rows, outcomes = 0, [], []
