@@ -31,9 +31,22 @@ from pathlib import Path
 
 from guidefit.errors import GuidefitError
 
-__all__ = ["OutputError", "refuse_inputs", "replacing", "write_text", "write_bytes",
-           "install_interrupt_handler", "handler_installed", "register_children", "interrupted_exit",
-           "quiet_worker", "quiet_unraisable", "one_line_warning", "interrupted", "INTERRUPT_GRACE_S"]
+__all__ = [
+    "INTERRUPT_GRACE_S",
+    "OutputError",
+    "handler_installed",
+    "install_interrupt_handler",
+    "interrupted",
+    "interrupted_exit",
+    "one_line_warning",
+    "quiet_unraisable",
+    "quiet_worker",
+    "refuse_inputs",
+    "register_children",
+    "replacing",
+    "write_bytes",
+    "write_text",
+]
 
 #: Seconds between Ctrl-C and the watchdog ending a process that has not ended by itself.
 INTERRUPT_GRACE_S = 0.3

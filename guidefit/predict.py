@@ -19,7 +19,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-
 #: The three stiffnesses ``predict`` reports, by key: what each one is.
 STIFFNESS_KINDS = {
     "static_zero_load": "static tangent stiffness at zero load (Eq. 2 with the preloaded rollers)",
