@@ -24,10 +24,16 @@ class _Group(click.Group):
 
     def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
         """Usage errors (bad option, missing argument, unknown command) as one line, exit 2."""
+        import warnings
+
+        from guidefit.outputs import one_line_warning
+
         if not standalone_mode:
             return super().main(args, prog_name, complete_var, standalone_mode, **extra)
         try:
-            code = super().main(args, prog_name, complete_var, False, **extra)
+            with warnings.catch_warnings():  # Python's warning text (file, line, source) is not for the user
+                warnings.showwarning = one_line_warning
+                code = super().main(args, prog_name, complete_var, False, **extra)
         except _NO_ARGS_IS_HELP as exc:  # bare `guidefit`: the help text, as click shows it
             exc.show()
             sys.exit(exc.exit_code)
@@ -39,7 +45,9 @@ class _Group(click.Group):
         except click.ClickException as exc:
             click.echo(f"guidefit: error: {' '.join(exc.format_message().split())}", err=True)
             sys.exit(exc.exit_code)
-        except click.exceptions.Abort:
+        except click.exceptions.Abort as exc:
+            if isinstance(exc.__context__, KeyboardInterrupt):
+                _interrupted()
             click.echo("guidefit: aborted", err=True)
             sys.exit(1)
         sys.exit(code if isinstance(code, int) else 0)
@@ -57,11 +65,17 @@ class _Group(click.Group):
             click.echo(f"guidefit: error: {where}{exc.strerror or exc}", err=True)
             sys.exit(2)
         except KeyboardInterrupt:
-            click.echo("guidefit: interrupted", err=True)
-            sys.exit(130)
+            _interrupted()
+        except RecursionError:  # a nested document deeper than any real input (readers say it where they can)
+            click.echo("guidefit: error: input nested too deeply to read (recursion limit)", err=True)
+            sys.exit(2)
         except (click.exceptions.Exit, click.ClickException, SystemExit):
             raise
         except Exception as exc:  # noqa: BLE001 - a bug of guidefit: still one line, never a traceback
+            from guidefit.outputs import interrupted
+
+            if interrupted():  # Ctrl-C broke something (an import reports it as ImportError)
+                _interrupted()
             where = ""
             tb = exc.__traceback__
             while tb is not None and tb.tb_next is not None:
@@ -71,6 +85,16 @@ class _Group(click.Group):
             click.echo(f"guidefit: internal error: {type(exc).__name__}: {exc}{where} "
                        "(please report this with the input file)", err=True)
             sys.exit(1)
+
+
+def _interrupted():
+    """Ctrl-C: one line, exit 130; in the guidefit program at once (no exit handler may wait)."""
+    from guidefit.outputs import handler_installed, interrupted_exit
+
+    if handler_installed():
+        interrupted_exit()
+    click.echo("guidefit: interrupted", err=True)
+    sys.exit(130)
 
 
 @click.group(cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})
@@ -107,6 +131,25 @@ def _parse_load(text: str | None):
     return values
 
 
+def _guide_file(name):
+    """The guide TOML a ``--guide`` names (an input of the command), None for a catalogue name."""
+    return name if name and os.path.isfile(name) else None
+
+
+def _refuse(outputs, inputs) -> None:
+    """Exit 2 (one line) before any work when an output would overwrite an input."""
+    from guidefit.outputs import refuse_inputs
+
+    refuse_inputs(outputs, inputs)
+
+
+def _written(path):
+    """Context manager: a temporary path beside ``path``, renamed onto it when complete."""
+    from guidefit.outputs import replacing
+
+    return replacing(path)
+
+
 @main.command()
 def guides():
     """List the built-in guide catalogue."""
@@ -122,23 +165,38 @@ def guides():
 @click.option("--load", "load_text", metavar="FV,FH,M",
               help="Static load: vertical force N (positive presses the carriage onto the rail), "
                    "lateral force N, roll moment N m.")
-@click.option("--sweep", is_flag=True, help="Static stiffness and frequencies over a load range.")
+@click.option("--sweep", "sweep_text", is_flag=False, flag_value="auto", default=None, metavar="[Q:FROM:TO:N]",
+              help="Stiffness and frequencies over a load range: Q (FV, FH in N; M in N m) from FROM to TO in "
+                   "N loads, the other components from --load, e.g. --sweep FV:0:900:10. Bare --sweep: "
+                   "0 to --load in 21 steps, or F_V from 0 to 90 % of lift-off.")
 @click.option("--calibration", type=click.Choice(["nominal", "law"]), default="nominal", show_default=True,
               help="Roller stiffness: the guide's nominal K_n, or the contact law's own value.")
-@click.option("--json", "as_json", is_flag=True, help="Print machine-readable JSON.")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON document.")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), help="Write a PNG plot.")
-def predict(guide_name, load_text, sweep, calibration, as_json, plot_path):
-    """Analytic stiffness (Eq. 1-4) and natural frequencies (Eq. 5-23) of a guide."""
+def predict(guide_name, load_text, sweep_text, calibration, as_json, plot_path):
+    """Analytic stiffness (Eq. 1-4) and natural frequencies (Eq. 5-23) of a guide.
+
+    Three stiffnesses, each named: the static tangent at zero load, the static tangent at
+    the given load, and the apparent single-DOF value 4 pi^2 M f^2 that identify would report.
+    """
     from guidefit import report
     from guidefit.model.guides import load_guide
+    from guidefit.predict import parse_sweep, predict_sweep
     from guidefit.predict import predict as run_predict
-    from guidefit.predict import predict_sweep
 
+    _refuse([plot_path], [_guide_file(guide_name)])
+    sweep = None
+    if sweep_text not in (None, "auto"):
+        try:
+            sweep = parse_sweep(sweep_text)
+        except ValueError as exc:
+            raise click.BadParameter(str(exc), param_hint="--sweep") from None
     guide = load_guide(guide_name)
     load = _parse_load(load_text)
-    if sweep:
-        frame = predict_sweep(guide, calibration=calibration, direction_load=load)
-        report.render_sweep(frame, as_json=as_json, plot_path=plot_path)
+    if sweep_text is not None:
+        frame = predict_sweep(guide, calibration=calibration, direction_load=load, sweep=sweep)
+        report.render_sweep(frame, as_json=as_json, plot_path=plot_path, guide_name=guide.name,
+                            calibration=calibration)
         return
     result = run_predict(guide, load=load, calibration=calibration)
     report.render_prediction(result, as_json=as_json, plot_path=plot_path)
@@ -165,6 +223,10 @@ def _identify_one(path, guide, settings):
     except GuidefitError as exc:
         return exc.exit_code, None, str(exc)
     except Exception as exc:  # noqa: BLE001 - a batch goes on; the file is reported
+        from guidefit.outputs import interrupted
+
+        if interrupted():  # Ctrl-C broke something (an import reports it as ImportError)
+            raise KeyboardInterrupt from None
         return 1, None, f"{path}: internal error: {type(exc).__name__}: {exc} (please report this file)"
 
 
@@ -226,11 +288,22 @@ def identify_cmd(files, guide_name, estimator, as_json, csv_path, summary_path, 
     from guidefit import report
     from guidefit.identify import IdentifySettings
 
+    plot_targets = {}
+    if plot_path:
+        plot_targets = {path: plot_path if len(files) == 1 else str(
+            Path(plot_path).with_stem(f"{Path(plot_path).stem}_{Path(path).stem}")) for path in files}
+    summary_paths = [csv_path] if summary_path == csv_path else [csv_path, summary_path]  # "same as --csv"
+    _refuse([*summary_paths, junit_path, *plot_targets.values()], [*files, check_path, _guide_file(guide_name)])
     spec = None
     if check_path:
         from guidefit.check import load_spec
 
-        spec = load_spec(check_path)
+        try:
+            spec = load_spec(check_path)
+        except RecursionError:  # tomllib reads nested arrays recursively
+            from guidefit.errors import GuidefitError
+
+            raise GuidefitError(f"{check_path}: not a tolerance spec (arrays or tables nested too deeply)") from None
     settings = IdentifySettings(estimator=estimator, jackknife=not no_jackknife, fft_precision=fft_precision)
     started = time.perf_counter()
     worst, rows, outcomes = 0, [], []
@@ -248,9 +321,8 @@ def identify_cmd(files, guide_name, estimator, as_json, csv_path, summary_path, 
                 click.echo(f"guidefit: identification rejected: {path}: {result.gate}", err=True)
                 code = max(code, 1)
             if plot_path:
-                target = plot_path if len(files) == 1 else str(
-                    Path(plot_path).with_stem(f"{Path(plot_path).stem}_{Path(path).stem}"))
-                report.plot_identification(result, target)
+                with _written(plot_targets[path]) as tmp:
+                    report.plot_identification(result, tmp)
             if not as_json:
                 report.render_identification(result, console)
         if spec is not None and result is not None:
@@ -268,11 +340,13 @@ def identify_cmd(files, guide_name, estimator, as_json, csv_path, summary_path, 
         gated = [f"identification rejected: {result.gate}"] if result is not None and result.gate else []
         outcomes.append((str(path), violations + gated, error))
     for target in filter(None, {csv_path, summary_path}):
-        report.write_summary_csv(rows, target)
+        with _written(target) as tmp:
+            report.write_summary_csv(rows, tmp)
     if junit_path:
         from guidefit.check import junit_xml
 
-        junit_xml(outcomes, junit_path, time.perf_counter() - started)
+        with _written(junit_path) as tmp:
+            junit_xml(outcomes, tmp, time.perf_counter() - started)
     if len(files) > 1 and not as_json:
         report.render_batch_summary(rows, outcomes, console)
     sys.exit(worst)
@@ -307,18 +381,46 @@ def _map_files(files, guide_name, settings, jobs, console):
                     progress.advance()
                 yield path, outcome
             return
-        from concurrent.futures import ProcessPoolExecutor
-
-        with ProcessPoolExecutor(max_workers=jobs) as pool:
-            futures = [pool.submit(_identify_one, path, guide_name, settings) for path in files]
-            for path, future in zip(files, futures):
-                outcome = future.result()
-                if progress:
-                    progress.advance()
-                yield path, outcome
+        yield from _pool_map(files, guide_name, settings, jobs, progress)
     finally:
         if progress:
             progress.close()
+
+
+def _pool_map(files, guide_name, settings, jobs, progress):
+    """``_identify_one`` over ``files`` in ``jobs`` worker processes, results in input order.
+
+    Ctrl-C is the parent's: workers ignore SIGINT (blocked while they are forked, ignored by
+    their initializer), and on an interrupt or an error the workers are killed, never waited
+    for (a worker in the middle of a file would hold the exit for its whole run).
+    """
+    import signal
+    from concurrent.futures import ProcessPoolExecutor
+
+    from guidefit.outputs import quiet_worker, register_children
+
+    pool = ProcessPoolExecutor(max_workers=jobs, initializer=quiet_worker)
+    done = False
+    try:
+        old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        try:  # the workers are forked here (a SIGINT now waits for the unblock below)
+            futures = [pool.submit(_identify_one, path, guide_name, settings) for path in files]
+            register_children(getattr(pool, "_processes", None) or {})
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, old)
+        for path, future in zip(files, futures):
+            outcome = future.result()
+            if progress:
+                progress.advance()
+            yield path, outcome
+        done = True
+    finally:
+        if done:
+            pool.shutdown(wait=True)
+        else:
+            for process in list((getattr(pool, "_processes", None) or {}).values()):
+                process.kill()
+            pool.shutdown(wait=False, cancel_futures=True)
 
 
 def _parse_window(text: str | None):
@@ -360,6 +462,7 @@ def frf_cmd(recording, estimator, window_text, out_path, fft_precision):
     from guidefit import report
     from guidefit.identify import IdentifySettings, frf_of_recording
 
+    _refuse([out_path], [recording])
     settings = IdentifySettings(estimator=estimator, window=_parse_window(window_text),
                                 fft_precision=fft_precision)
     frfsets, warnings = frf_of_recording(recording, settings)
@@ -369,7 +472,8 @@ def frf_cmd(recording, estimator, window_text, out_path, fft_precision):
         from guidefit.frf_io import write_frfs
         from guidefit.io.frf_files import read_metadata
 
-        write_frfs(out_path, frfsets, recording=read_metadata(recording))  # a recording's or FRF file's runs
+        with _written(out_path) as tmp:
+            write_frfs(tmp, frfsets, recording=read_metadata(recording))  # a recording's or FRF file's runs
         click.echo(f"FRFs of {len(frfsets)} run(s) written to {out_path}")
     else:
         report.render_frf_summary(frfsets)
@@ -393,6 +497,7 @@ def explain_cmd(recording, modes_path, guide_name, candidates, as_json, plot_pat
 
     if (recording is None) == (modes_path is None):
         raise click.UsageError("give a RECORDING or --modes FILE (one of them)")
+    _refuse([plot_path], [recording, modes_path, _guide_file(guide_name)])
     names = _candidate_names(candidates)
     settings = _identify_settings(estimator, no_jackknife, fft_precision)
     source = modes_path or recording
@@ -412,7 +517,8 @@ def explain_cmd(recording, modes_path, guide_name, candidates, as_json, plot_pat
                 raise
             raise _named_guide_error(source, exc) from None
     if plot_path:
-        report.plot_explanation_with_frf(result, plot_path, ident)
+        with _written(plot_path) as tmp:
+            report.plot_explanation_with_frf(result, tmp, ident)
     if as_json:
         click.echo(report.dump_json(result.to_dict()))
     else:
@@ -464,14 +570,16 @@ def export_cmd(results, fmt, joint, explain_paths, guide_name, element, units, a
     from guidefit import report
     from guidefit.export import export
 
+    _refuse([out_path], [results, *explain_paths, _guide_file(guide_name)])
     with report.spinner("explaining carriages", enabled=joint == "explained") as progress:
         text = export(results, fmt, joint=joint, explanations=explain_paths, guide=guide_name, element=element,
                       units=units, axis_map=axis_map, carriage_nodes=_id_list(carriage_nodes, "--carriage-node"),
                       rail_nodes=_id_list(rail_nodes, "--rail-node"), first_element=first_element,
                       id_step=id_step, n_vertical=n_vertical, n_horizontal=n_horizontal, progress=progress)
     if out_path:
-        with open(out_path, "w", encoding="utf-8") as handle:
-            handle.write(text)
+        from guidefit.outputs import write_text
+
+        write_text(out_path, text)
     else:
         click.echo(text, nl=False)
 
@@ -488,6 +596,7 @@ def report_cmd(recording, out_path, guide_name, candidates, estimator, no_jackkn
     from guidefit import report
     from guidefit.html_report import write_report
 
+    _refuse([out_path], [recording, _guide_file(guide_name)])
     settings = _identify_settings(estimator, no_jackknife, fft_precision)
     with report.spinner("identifying and explaining") as progress:
         write_report(recording, out_path, guide=guide_name, settings=settings,

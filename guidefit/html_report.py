@@ -450,29 +450,20 @@ def render_html(res: ReportResults) -> str:
 
 
 def write_report(path, out_path, guide=None, settings=None, candidates=None, progress=None) -> None:
-    """Identify and explain one recording (:func:`report_results`) and write the HTML report whole."""
+    """Identify and explain one recording (:func:`report_results`) and write the HTML report whole.
+
+    Never onto an input (the recording, a guide TOML): :class:`guidefit.outputs.OutputError`
+    before any work. The file is written to a temporary file and renamed when complete
+    (:func:`guidefit.outputs.write_text`).
+    """
     import os
-    import tempfile
-    from pathlib import Path
 
-    out = Path(out_path)
-    if out.exists() and Path(path).exists() and os.path.samefile(out, path):
-        from guidefit.errors import RecordingError
+    from guidefit.outputs import refuse_inputs, write_text
 
-        raise RecordingError(f"{out}: is the input recording; choose another output file")
+    refuse_inputs([out_path], [path, guide if isinstance(guide, (str, os.PathLike)) else None])
     text = render_html(report_results(path, guide=guide, settings=settings, candidates=candidates,
                                       progress=progress))
-    fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent if str(out.parent) else ".")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as handle:
-            handle.write(text)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # as open() would have made it, not mkstemp's 0600
-        os.replace(tmp, out)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    write_text(out_path, text)
 
 
 def loads_embedded(text: str) -> dict:

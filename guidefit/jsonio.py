@@ -34,6 +34,8 @@ def read_json_documents(path) -> list:
         return [json.loads(text)]
     except json.JSONDecodeError:
         pass
+    except RecursionError:  # the decoder recurses per nesting level
+        raise RecordingError(f"{p}: not a result file (arrays or objects nested too deeply)") from None
     docs = []
     for number, line in enumerate(text.splitlines(), start=1):
         if not line.strip():
@@ -42,4 +44,6 @@ def read_json_documents(path) -> list:
             docs.append(json.loads(line))
         except json.JSONDecodeError as exc:
             raise RecordingError(f"{p}: line {number}: not JSON ({exc.msg})") from None
+        except RecursionError:
+            raise RecordingError(f"{p}: line {number}: arrays or objects nested too deeply") from None
     return docs

@@ -65,61 +65,113 @@ def print_guides(guides) -> None:
     _console().print(table)
 
 
-def render_prediction(result, as_json: bool = False, plot_path: str | None = None) -> None:
-    """Print a :class:`guidefit.predict.Prediction` as a table or JSON; optional plot."""
+def _narrow_table(title: str | None = None):
+    """A rich table that fits 80 columns: no outer edge padding, light borders."""
+    from rich import box
+    from rich.table import Table
+
+    return Table(title=title, box=box.SIMPLE_HEAD, pad_edge=False, collapse_padding=True)
+
+
+def render_prediction(result, as_json: bool = False, plot_path: str | None = None, console=None) -> None:
+    """Print a :class:`guidefit.predict.Prediction` as tables (readable at 80 columns) or one JSON
+    document; optional plot. Each stiffness is named for what it is."""
     data = result.to_dict()
     if plot_path:
-        plot_prediction(result, plot_path)
+        _save_figure(lambda path: plot_prediction(result, path), plot_path)
     if as_json:
         print(dump_json(data))
         return
-    from rich.table import Table
-
+    console = console or _console()
     fv, fh, m = result.load
-    table = Table(title=f"{result.guide.name}: load F_V={fv:g} N, F_H={fh:g} N, M={m:g} N m "
-                        f"(calibration: {result.calibration})")
-    table.add_column("quantity")
-    table.add_column("value", justify="right")
-    table.add_column("equation")
     st = data["stiffness"]
-    table.add_row("K_n (mean per roller)", fmt(st["K_n"]["value"], "N/m"), "Eq. (3)-(4)")
-    table.add_row("K_V", fmt(st["K_V"]["value"], "N/m"), "Eq. (2)")
-    table.add_row("K_H", fmt(st["K_H"]["value"], "N/m"), "Eq. (2)")
-    table.add_row("K_gamma", fmt(st["K_gamma"]["value"], "N m/rad"), "Eq. (2)")
-    eq = {"vertical": "Eq. (15)", "pitch": "Eq. (16)", "yaw": "Eq. (17)",
-          "roll_low": "Eq. (18)-(23)", "roll_high": "Eq. (18)-(23)"}
+    table = _narrow_table(f"{result.guide.name} stiffness, load F_V={fv:g} N, F_H={fh:g} N, M={m:g} N m "
+                          f"({result.calibration} K_n)")
+    table.add_column("stiffness")
+    for head in ("K_V (N/m)", "K_H (N/m)", "K_gamma (N m/rad)"):
+        table.add_column(head, justify="right")
+    table.add_column("Eq.")
+
+    def value(block, key):
+        return fmt(block[key]["value"]) if key in block else "-"
+
+    for key, label, eq in (("static_zero_load", "static tangent, zero load", "2"),
+                           ("static_at_load", "static tangent, this load", "1-4"),
+                           ("apparent_single_dof", "apparent 1-DOF (identify)", "24-25")):
+        block = st[key]
+        table.add_row(label, value(block, "K_V"), value(block, "K_H"), value(block, "K_gamma"), eq)
+    console.print(table)
+    console.print(f"K_n {fmt(st['K_n']['value'], 'N/m')} per roller (Eq. 3-4). apparent 1-DOF: 4 pi^2 M f^2 of "
+                  "the vertical and roll_low modes, what identify reports; not the static stiffness.",
+                  highlight=False)
+    modes = _narrow_table(f"{result.guide.name} natural frequencies (Eq. 5-23)")
+    modes.add_column("mode")
+    modes.add_column("f (Hz)", justify="right")
+    modes.add_column("closed form (Hz)", justify="right")
+    modes.add_column("Eq.")
+    eq = {"vertical": "15", "pitch": "16", "yaw": "17", "roll_low": "18-23", "roll_high": "18-23"}
     for mode in data["modes"]:
         closed = data["closed_form_hz"].get(mode["label"])
-        note = eq.get(mode["label"], "assembled")
-        if closed is not None:
-            note += f" closed form {closed:.1f} Hz"
-        table.add_row(f"f {mode['label']}", f"{mode['frequency_hz']:.1f} Hz", note)
+        modes.add_row(mode["label"], f"{mode['frequency_hz']:.1f}", "-" if closed is None else f"{closed:.1f}",
+                      eq.get(mode["label"], "assembled"))
+    console.print(modes)
     if data["rows_lifted"]:
-        table.add_row("rows lifted off", ", ".join(map(str, data["rows_lifted"])), "compression only")
-    _console().print(table)
+        console.print(f"rows lifted off: {', '.join(map(str, data['rows_lifted']))} (contacts carry compression only)")
     if plot_path:
-        _console().print(f"plot written to {plot_path}")
+        console.print(f"plot written to {plot_path}")
 
 
-def render_sweep(frame, as_json: bool = False, plot_path: str | None = None) -> None:
-    """Print a load sweep (DataFrame) as a table or JSON lines; optional plot."""
+#: Sweep table columns: (frame column, heading, digits); the full set is in --json.
+_SWEEP_COLUMNS = (("K_V_static_n_per_m", "K_V stat", 3), ("K_H_static_n_per_m", "K_H stat", 3),
+                  ("K_V_apparent_n_per_m", "K_V app", 3), ("K_H_apparent_n_per_m", "K_H app", 3),
+                  ("f_vertical_hz", "f_V", 4), ("f_roll_low_hz", "f_H", 4), ("rows_lifted", "lifted", 0))
+
+
+def _sweep_axis(frame) -> tuple[str, str, str]:
+    """(column, label, unit) of the swept load."""
+    sweep = frame.attrs.get("sweep", {})
+    column = sweep.get("column", frame.columns[0])
+    unit = sweep.get("unit", "N m" if column.endswith("_nm") else "N")
+    names = {"F_V_n": "F_V", "F_H_n": "F_H", "M_gamma_nm": "M_gamma", "load_n": "load", "load_nm": "moment"}
+    return column, names.get(column, column), unit
+
+
+def render_sweep(frame, as_json: bool = False, plot_path: str | None = None, guide_name: str = "",
+                 calibration: str = "nominal", console=None) -> None:
+    """Print a load sweep (:func:`guidefit.predict.predict_sweep`) as a table readable at 80
+    columns, or as ONE JSON document (:func:`guidefit.predict.sweep_document`); optional plot."""
+    from guidefit.predict import sweep_document
+
     if plot_path:
-        plot_sweep(frame, plot_path)
+        _save_figure(lambda path: plot_sweep(frame, path), plot_path)
     if as_json:
-        for row in frame.to_dict(orient="records"):
-            print(dump_json(row))
+        print(dump_json(sweep_document(frame, guide_name, calibration)))
         return
-    from rich.table import Table
+    console = console or _console()
+    column, label, unit = _sweep_axis(frame)
+    table = _narrow_table(f"{guide_name} load sweep: K in N/m, f in Hz (all columns: --json)".strip())
+    table.add_column(f"{label} ({unit})", justify="right")
+    for _, head, _ in _SWEEP_COLUMNS:
+        table.add_column(head, justify="right")
+    for _, row in frame.iterrows():
+        cells = [f"{row[column]:.5g}"]
+        for key, _, digits in _SWEEP_COLUMNS:
+            v = row[key]
+            cells.append(str(v or "-") if not digits else (f"{v:.{digits - 1}e}" if digits == 3 else f"{v:.0f}"))
+        table.add_row(*cells)
+    console.print(table)
+    console.print("stat: static tangent stiffness at the load (Eq. 1-4); app: apparent 1-DOF 4 pi^2 M f^2 "
+                  "(Eq. 24-25, what identify reports); f_H: the roll_low mode.", highlight=False)
+    if plot_path:
+        console.print(f"plot written to {plot_path}")
 
-    table = Table(title="load sweep (all columns: --json)")
-    shown = [frame.columns[0]] + [c for c in frame.columns if c.startswith(("K_", "f_")) or c == "rows_lifted"]
-    heads = {c: c.replace("_n_per_m", " (N/m)").replace("_nm_per_rad", " (N m/rad)").replace("_hz", " (Hz)")
-             .replace("f_", "").replace("_n", " (N)") for c in shown}
-    for col in shown:
-        table.add_column(heads[col], justify="right")
-    for row in frame[shown].itertuples(index=False):
-        table.add_row(*(fmt(v) if isinstance(v, float) else str(v) for v in row))
-    _console().print(table)
+
+def _save_figure(draw, path) -> None:
+    """``draw(tmp)`` writes a figure to a temporary file renamed onto ``path`` when complete."""
+    from guidefit.outputs import replacing
+
+    with replacing(path) as tmp:
+        draw(tmp)
 
 
 def _figure(n_rows: int = 1, n_cols: int = 1, size=(8, 5)):
@@ -133,6 +185,8 @@ def _figure(n_rows: int = 1, n_cols: int = 1, size=(8, 5)):
 
 def plot_prediction(result, path: str) -> None:
     """Load-deflection curves (the paper's Figure 3) and the mode frequencies."""
+    import matplotlib.pyplot as plt
+
     from guidefit.model import static
 
     fig, axes = _figure(1, 2, (11, 4.5))
@@ -151,26 +205,34 @@ def plot_prediction(result, path: str) -> None:
     axes[0, 1].set_title(f"{result.guide.name} modes (Eq. 5-23)")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
+    plt.close(fig)
 
 
 def plot_sweep(frame, path: str) -> None:
-    """Frequencies and stiffnesses against load."""
+    """Frequencies (Hz) and the static and apparent stiffnesses (N/m) against the swept load."""
+    import matplotlib.pyplot as plt
+
+    column, label, unit = _sweep_axis(frame)
     fig, axes = _figure(1, 2, (11, 4.5))
-    load = frame.iloc[:, 0]
+    load = frame[column]
     for col in frame.columns:
         if col.startswith("f_") and col.endswith("_hz"):
             axes[0, 0].plot(load, frame[col], label=col[2:-3])
-        if col.startswith("K_") and "per_m" in col:
-            axes[0, 1].plot(load, frame[col], label=col)
-    axes[0, 0].set_xlabel(frame.columns[0])
-    axes[0, 0].set_ylabel("frequency (Hz)")
+    styles = {"static": "-", "apparent": "--"}
+    for kind, style in styles.items():
+        for key in ("V", "H"):
+            axes[0, 1].plot(load, frame[f"K_{key}_{kind}_n_per_m"], style, label=f"K_{key} {kind}")
+    axes[0, 0].set_xlabel(f"{label} ({unit})")
+    axes[0, 0].set_ylabel("natural frequency (Hz)")
     axes[0, 0].legend()
-    axes[0, 1].set_xlabel(frame.columns[0])
-    axes[0, 1].set_ylabel("stiffness")
+    axes[0, 1].set_xlabel(f"{label} ({unit})")
+    axes[0, 1].set_ylabel("stiffness (N/m)")
     axes[0, 1].set_yscale("log")
+    axes[0, 1].set_title("static tangent (Eq. 1-4) and apparent 1-DOF (Eq. 24-25)", fontsize=9)
     axes[0, 1].legend()
     fig.tight_layout()
     fig.savefig(path, dpi=110)
+    plt.close(fig)
 
 
 # --------------------------------------------------------------------------- identify

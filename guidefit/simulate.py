@@ -95,6 +95,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import os
 import zlib
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
@@ -964,7 +965,10 @@ class _progress:
         from rich.console import Console
         from rich.progress import Progress
 
-        self.bar = Progress(console=Console(stderr=True), transient=True)
+        console = Console(stderr=True)
+        if not console.is_terminal:  # a log or a pipe gets no bar (nor the blank line it leaves)
+            return lambda: None
+        self.bar = Progress(console=console, transient=True)
         self.bar.__enter__()
         task = self.bar.add_task("simulating hits", total=self.total)
         return lambda: self.bar.advance(task)
@@ -1180,22 +1184,28 @@ def write_simulation(path, guide, effects=(), config: SimulationConfig | None = 
             path = path.with_suffix(".csv")
     elif suffix not in ("h5", "hdf5"):
         path = path.with_suffix(".h5")
-    if fmt == "h5" and config.layout == "signals":
-        truth = _stream_h5(path, guide, effects, config, seed, progress)
+    from guidefit.outputs import refuse_inputs, replacing, write_text
+
+    runs = list(config.runs)
+    if fmt == "csv" and len(runs) > 1:
+        written = [path.with_name(f"{path.stem}_{run.name}.csv") for run in runs]
+    else:
         written = [path]
+    target = truth_path(path)
+    # every output is written whole (temporary file + rename) and never onto an input
+    refuse_inputs([*written, target], [guide if isinstance(guide, (str, os.PathLike)) else None])
+    if fmt == "h5" and config.layout == "signals":
+        with replacing(path) as tmp:  # the runs are appended block by block: renamed when all are in
+            truth = _stream_h5(tmp, guide, effects, config, seed, progress)
     else:
         recording, truth = simulate(guide, effects, config, seed, progress=progress)
         if fmt == "h5":
             write_recording(path, recording, compression="gzip")
-            written = [path]
         elif len(recording.runs) == 1:
             write_recording(path, recording)
-            written = [path]
         else:
-            written = [path.with_name(f"{path.stem}_{run.name}.csv") for run in recording.runs]
-            for target, run in zip(written, recording.runs):
-                write_recording(target, RecordingData((run,), recording.guide, recording.description))
+            for out, run in zip(written, recording.runs):
+                write_recording(out, RecordingData((run,), recording.guide, recording.description))
     truth = {**truth, "recordings": [p.name for p in written]}
-    target = truth_path(path)
-    target.write_text(truth_json(truth), encoding="utf-8")
+    write_text(target, truth_json(truth))
     return SimulationFiles(tuple(written), target, truth)

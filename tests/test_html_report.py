@@ -112,7 +112,7 @@ def test_report_refuses_to_overwrite_its_input(tmp_path):
     rec = tmp_path / "rec.h5"
     shutil.copyfile(SAMPLE, rec)
     result = CliRunner().invoke(main, ["report", str(rec), "-o", str(rec)])
-    assert result.exit_code == 2 and "input recording" in result.output
+    assert result.exit_code == 2 and "is an input of this command" in result.output
     assert rec.read_bytes() == SAMPLE.read_bytes()
 
 

@@ -216,18 +216,15 @@ def _first_line(exc: BaseException) -> str:
 
 
 def _atomic(p, write) -> None:
-    """``write(tmp)`` to ``<p>.part``, then rename it over ``p``; on any error no file is left."""
-    import contextlib
-    import os
+    """``write(tmp)`` to a temporary file beside ``p`` (same suffix), then rename it over ``p``;
+    on any error (an interrupt included) no file is left and ``p`` is untouched.
 
-    tmp = p.with_name(p.name + ".part")
-    try:
+    The shared helper of every output file: :func:`guidefit.outputs.replacing`.
+    """
+    from guidefit.outputs import replacing
+
+    with replacing(p) as tmp:
         write(tmp)
-        os.replace(tmp, p)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            tmp.unlink()
-        raise
 
 
 def _require(module: str, extra: str, display: str, what: str):

@@ -525,7 +525,7 @@ def _write_csv(tmp: Path, display: str, recording: RecordingData) -> None:
                 fmt=["%.10g"] + ["%.17g"] * data.shape[1],
             )
     except OSError as exc:
-        raise RecordingError(f"{display}: cannot write ({_first_line(exc)})") from None
+        raise RecordingError(f"{display}: cannot write ({exc.strerror or _first_line(exc)})") from None
 
 
 

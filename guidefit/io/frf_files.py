@@ -268,7 +268,10 @@ def write_frf_csv_file(path, frfsets, *, recording=None) -> None:
 def write_frf_h5_file(path, frfsets, *, recording=None) -> None:
     """:func:`guidefit.frf.write_frf_h5`, plus the recording's geometry of each run (module docstring).
 
-    Written to ``<path>.part`` and renamed when complete. ``recording`` (a
+    Written whole (a temporary file renamed when complete); the HDF5 image is
+    built in memory and written with one plain write, because a disk write
+    failing inside libhdf5 (full disk, file-size limit) leaves h5py objects
+    that crash the interpreter when freed. ``recording`` (a
     :class:`~guidefit.io.records.Recording` or a path) gives each run's
     excitation direction and hit point and the response channels' positions
     and directions; without it the file holds the FRFs only.
@@ -279,31 +282,40 @@ def write_frf_h5_file(path, frfsets, *, recording=None) -> None:
     runs = _runs_of(recording)
 
     def write(tmp: Path) -> None:
-        import h5py
+        import io
 
-        write_frf_h5(tmp, frfsets)
-        if runs is None:
-            return
-        with h5py.File(tmp, "r+") as f:
-            root = f["frf"]
-            if runs["guide"]:
-                root.attrs["guide"] = runs["guide"]
-            root.attrs["source_file"] = runs["file"]
-            for name, g in root.items():
-                run = runs["runs"].get(name)
-                if run is None:
-                    continue
-                by_name = {ch.name: ch for ch in run.channels}
-                names = [c.decode() if isinstance(c, bytes) else str(c) for c in g.attrs["channels"]]
-                if not all(n in by_name for n in names):
-                    continue
-                g.attrs["excitation_direction"] = np.asarray(run.excitation_direction, float)
-                hit = run.excitation_position_m
-                g.attrs["excitation_position_m"] = np.full(3, np.nan) if hit is None else np.asarray(hit, float)
-                g.attrs["positions_m"] = np.array([by_name[n].position_m for n in names], float)
-                g.attrs["directions"] = np.array([by_name[n].direction for n in names], float)
+        image = io.BytesIO()
+        write_frf_h5(image, frfsets)
+        if runs is not None:
+            _add_geometry(image, runs)
+        with open(tmp, "wb") as out:
+            out.write(image.getbuffer())
 
     _atomic(Path(os.fspath(path)), write)
+
+
+def _add_geometry(image, runs: dict) -> None:
+    """Each run's excitation and the sensors' positions and directions as attributes of its group."""
+    import h5py
+
+    with h5py.File(image, "r+") as f:
+        root = f["frf"]
+        if runs["guide"]:
+            root.attrs["guide"] = runs["guide"]
+        root.attrs["source_file"] = runs["file"]
+        for name, g in root.items():
+            run = runs["runs"].get(name)
+            if run is None:
+                continue
+            by_name = {ch.name: ch for ch in run.channels}
+            names = [c.decode() if isinstance(c, bytes) else str(c) for c in g.attrs["channels"]]
+            if not all(n in by_name for n in names):
+                continue
+            g.attrs["excitation_direction"] = np.asarray(run.excitation_direction, float)
+            hit = run.excitation_position_m
+            g.attrs["excitation_position_m"] = np.full(3, np.nan) if hit is None else np.asarray(hit, float)
+            g.attrs["positions_m"] = np.array([by_name[n].position_m for n in names], float)
+            g.attrs["directions"] = np.array([by_name[n].direction for n in names], float)
 
 
 def _runs_of(recording) -> dict | None:

@@ -691,42 +691,59 @@ def write_hdf5(path, recording, *, compression: str | None = None) -> None:
 
 
 def _write_hdf5(tmp: Path, display: str, recording, compression) -> None:
+    import io
+
     import h5py
 
+    # Samples already in memory: the file is built in memory and written in one plain write.
+    # A failing disk write inside libhdf5 (full disk, file-size limit) leaves h5py objects that
+    # crash the interpreter when freed (segfault, tracebacks); a failing Python write is one error.
+    in_memory = all(isinstance(run, RunData) for run in recording.runs)
+    image = io.BytesIO() if in_memory else None
     try:
-        f = h5py.File(tmp, "w")
+        f = h5py.File(image if in_memory else tmp, "w")
     except OSError as exc:
         raise RecordingError(f"{display}: cannot create file ({_first_line(exc)})") from None
     with f:
-        _write_root(f, recording.guide, recording.description)
-        runs_group = f.create_group("runs", track_order=True)
-        for run in recording.runs:
-            if isinstance(run, RunData):
-                if run.data is None:
-                    raise RecordingError(f"{display}: run '{run.name}': no data to write")
-                data = run.data
-                if 0 in data.shape:
-                    raise RecordingError(
-                        f"{display}: run '{run.name}': data has shape {data.shape}; it holds no samples"
-                    )
-                dtype = _file_dtype(data.dtype)
-                ds = _create_run(
-                    runs_group, _header(run), run.layout, data.shape, dtype, compression
+        _write_hdf5_runs(f, display, recording, compression)
+    if in_memory:
+        try:
+            with open(tmp, "wb") as out:
+                out.write(image.getbuffer())
+        except OSError as exc:
+            raise RecordingError(f"{display}: cannot write ({exc.strerror or _first_line(exc)})") from None
+
+
+def _write_hdf5_runs(f, display: str, recording, compression) -> None:
+    _write_root(f, recording.guide, recording.description)
+    runs_group = f.create_group("runs", track_order=True)
+    for run in recording.runs:
+        if isinstance(run, RunData):
+            if run.data is None:
+                raise RecordingError(f"{display}: run '{run.name}': no data to write")
+            data = run.data
+            if 0 in data.shape:
+                raise RecordingError(
+                    f"{display}: run '{run.name}': data has shape {data.shape}; it holds no samples"
                 )
-                ds[...] = data
-            else:  # a Run read from a file: copy block by block in stored units
-                dtype = _file_dtype(run.sample_dtype if _in_units(run, None) is None else np.float64)
-                if run.layout == "signals":
-                    shape = (run.n_samples, run.n_channels)
-                    ds = _create_run(runs_group, _header(run), "signals", shape, dtype, compression)
-                    for start in range(0, run.n_samples, _COPY_ROWS):
-                        stop = min(run.n_samples, start + _COPY_ROWS)
-                        ds[start:stop] = _in_units(run, _raw_read(run, (slice(start, stop), slice(None))))
-                else:
-                    shape = (run.n_hits_stored, run.n_samples, run.n_channels)
-                    ds = _create_run(runs_group, _header(run), "hits", shape, dtype, compression)
-                    for i in range(run.n_hits_stored):
-                        ds[i] = _in_units(run, _raw_read(run, (i, slice(None), slice(None))))
+            dtype = _file_dtype(data.dtype)
+            ds = _create_run(
+                runs_group, _header(run), run.layout, data.shape, dtype, compression
+            )
+            ds[...] = data
+        else:  # a Run read from a file: copy block by block in stored units
+            dtype = _file_dtype(run.sample_dtype if _in_units(run, None) is None else np.float64)
+            if run.layout == "signals":
+                shape = (run.n_samples, run.n_channels)
+                ds = _create_run(runs_group, _header(run), "signals", shape, dtype, compression)
+                for start in range(0, run.n_samples, _COPY_ROWS):
+                    stop = min(run.n_samples, start + _COPY_ROWS)
+                    ds[start:stop] = _in_units(run, _raw_read(run, (slice(start, stop), slice(None))))
+            else:
+                shape = (run.n_hits_stored, run.n_samples, run.n_channels)
+                ds = _create_run(runs_group, _header(run), "hits", shape, dtype, compression)
+                for i in range(run.n_hits_stored):
+                    ds[i] = _in_units(run, _raw_read(run, (i, slice(None), slice(None))))
 
 
 class SignalsWriter:
@@ -879,13 +896,18 @@ def open_signals_writer(
         if not ok and mode == "a":
             with contextlib.suppress(Exception):
                 del runs_group[run.name]
-        f.close()
-        if mode == "w":
-            if ok:
-                os.replace(target, p)
-            else:
-                with contextlib.suppress(OSError):
-                    target.unlink()
+        try:
+            f.close()
+        except BaseException:
+            ok = False  # a close that fails (full disk) leaves an incomplete file
+            raise
+        finally:
+            if mode == "w":
+                if ok:
+                    os.replace(target, p)
+                else:
+                    with contextlib.suppress(OSError):
+                        target.unlink()
 
 
 FORMATS = (

@@ -163,6 +163,18 @@ def builtin_guides() -> list[str]:
     return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
 
 
+# Bounds that keep every model of a guide small. The models are dense in the rollers: the
+# static contact model and the effects hold (4 Z_L)-square matrices, so 10^4 rollers per row
+# asked for ~24 GB and was killed. Catalogue roller carriages carry 10-60 rollers per row
+# (full complement, sizes 15-100); 1,000 leaves room for any real guide at < 0.5 GB.
+MAX_ROLLERS_PER_ROW = 1_000
+"""Largest ``rows.rollers_per_row`` a guide may have (the model has four rows)."""
+MAX_POINTS = 100
+"""Largest number of ``[points]`` (measuring points A-D and any others)."""
+MAX_GUIDE_FILE_BYTES = 1_000_000
+"""Largest guide TOML read (the built-in one is ~2 kB): a bigger file is not a guide."""
+
+
 def load_guide(name_or_path: str | Path) -> Guide:
     """Load a built-in guide by name (``"MRB35"``) or a user's guide TOML file.
 
@@ -181,7 +193,11 @@ def load_guide(name_or_path: str | Path) -> Guide:
         known = ", ".join(builtin_guides())
         raise GuideError(f"guide '{text_path}': not a built-in guide ({known}) and no such file")
     try:
-        text = path.read_text(encoding="utf-8")
+        with path.open("rb") as handle:
+            raw = handle.read(MAX_GUIDE_FILE_BYTES + 1)
+        if len(raw) > MAX_GUIDE_FILE_BYTES:
+            raise GuideError(f"{path}: guide file larger than {MAX_GUIDE_FILE_BYTES // 1000} kB; not a guide TOML")
+        text = raw.decode("utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise GuideError(f"{path}: cannot read guide file ({exc.__class__.__name__})") from None
     return _parse(text, str(path), str(path))
@@ -194,6 +210,8 @@ def _parse(text: str, where: str, source: str) -> Guide:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise GuideError(f"{where}: not valid TOML ({exc})") from None
+    except RecursionError:  # tomllib reads nested arrays and tables recursively
+        raise GuideError(f"{where}: not a guide TOML (arrays or tables nested too deeply)") from None
     unknown = sorted(set(data) - _TOP_LEVEL)
     if unknown:
         raise GuideError(f"{where}: unknown field '{unknown[0]}'; allowed: {', '.join(sorted(_TOP_LEVEL))}")
@@ -219,6 +237,8 @@ def _parse(text: str, where: str, source: str) -> Guide:
     points = data.get("points", {})
     if not isinstance(points, dict):
         raise GuideError(f"{where}: [points] must be a table of name = [x, y, z]")
+    if len(points) > MAX_POINTS:
+        raise GuideError(f"{where}: {len(points)} measuring points in [points]; at most {MAX_POINTS}")
     values["measuring_points_m"] = {
         str(k): tuple(_convert(v, "m", "vec3", f"{where}: field 'points.{k}'")) for k, v in points.items()
     }
@@ -287,6 +307,9 @@ def _convert(value, unit, kind, what):
 
 
 def _check_physical(guide: Guide, where: str) -> None:
+    if guide.rollers_per_row > MAX_ROLLERS_PER_ROW:
+        raise GuideError(f"{where}: field 'rows.rollers_per_row' is {guide.rollers_per_row}; at most "
+                         f"{MAX_ROLLERS_PER_ROW} (real carriages have 10-60; the model is dense in the rollers)")
     if not 0 < guide.contact_angle_deg < 90:
         raise GuideError(f"{where}: field 'rows.contact_angle_deg' must be in (0, 90), got {guide.contact_angle_deg}")
     if guide.rollers_per_row > 1 and guide.roller_span_m <= 0:

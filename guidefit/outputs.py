@@ -1,0 +1,365 @@
+"""Output files written whole, never over an input, and interrupts that end cleanly.
+
+Every file guidefit writes (tables, plots, FRFs, reports, decks, recordings)
+goes through :func:`replacing`: the writer writes a temporary file in the
+destination's folder, and only a complete file is renamed onto the
+destination with :func:`os.replace`. A kill, a full disk or a file-size limit
+therefore leaves the destination as it was (or absent) and no temporary file
+behind, never a truncated file that looks complete. ``os.replace`` renames
+onto the destination's *name*: a symbolic link there is replaced by the new
+file, its target is not written through.
+
+:func:`refuse_inputs` is the guard every command runs before it starts: an
+output that is one of the command's inputs (the same path, a hard link, a
+symbolic link to it) is a one-line :class:`OutputError` (exit 2).
+
+:func:`install_interrupt_handler` is the command line's Ctrl-C: the main
+thread gets ``KeyboardInterrupt`` (the command unwinds, temporary files are
+removed, exit 130 with one line); should the process still be alive a moment
+later (a C call that does not return, an exit handler waiting on a worker),
+a watchdog thread removes the pending temporary files, kills the registered
+worker processes, says ``guidefit: interrupted`` and ends the process.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import sys
+import threading
+from pathlib import Path
+
+from guidefit.errors import GuidefitError
+
+__all__ = [
+    "INTERRUPT_GRACE_S",
+    "OutputError",
+    "handler_installed",
+    "install_interrupt_handler",
+    "interrupted",
+    "interrupted_exit",
+    "one_line_warning",
+    "quiet_unraisable",
+    "quiet_worker",
+    "refuse_inputs",
+    "register_children",
+    "replacing",
+    "write_bytes",
+    "write_text",
+]
+
+#: Seconds between Ctrl-C and the watchdog ending a process that has not ended by itself.
+INTERRUPT_GRACE_S = 0.3
+
+_PENDING: set[str] = set()  # temporary files being written (removed by the interrupt watchdog)
+_CHILDREN: set[int] = set()  # worker processes the interrupt watchdog kills
+_LOCK = threading.Lock()
+_SAID = threading.Event()  # "guidefit: interrupted" written (once per process)
+_INSTALLED = threading.Event()  # install_interrupt_handler ran (the guidefit program)
+
+
+class OutputError(GuidefitError, ValueError):
+    """An output cannot be written where asked (it is an input, or its folder is missing)."""
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:  # one of them does not exist (or cannot be inspected): compare names
+        return os.path.abspath(a) == os.path.abspath(b)
+
+
+def refuse_inputs(outputs, inputs) -> None:
+    """Raise :class:`OutputError` when an output is one of the inputs, or two outputs are one file.
+
+    ``outputs`` and ``inputs`` are paths (``None`` entries are ignored). Same
+    file means the same inode (:func:`os.path.samefile`: hard links and
+    symbolic links to an input count), or the same absolute name.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     rec = pathlib.Path(folder) / "rec.h5"
+    ...     _ = rec.write_bytes(b"x")
+    ...     refuse_inputs([pathlib.Path(folder) / "out.csv"], [rec])   # fine
+    ...     try:
+    ...         refuse_inputs([rec], [rec])
+    ...     except OutputError as exc:
+    ...         print(str(exc).split(": ", 1)[1].split(" (")[0])
+    is an input of this command
+    """
+    ins = [Path(p) for p in inputs if p is not None]
+    outs = [Path(p) for p in outputs if p is not None]
+    for k, out in enumerate(outs):
+        for src in ins:
+            if _same_file(out, src):
+                raise OutputError(f"{out}: is an input of this command ({src}); choose another output file")
+        for other in outs[:k]:  # two outputs onto one file: the second would replace the first
+            if _same_file(out, other):
+                raise OutputError(f"{out}: is given for two outputs of this command ({other}); "
+                                  "choose different files")
+
+
+def _temp_name(p: Path) -> tuple[int, Path]:
+    """A new temporary file beside ``p`` with the same suffix (writers choose formats by suffix)."""
+    import tempfile
+
+    folder = p.parent if str(p.parent) else Path(".")
+    if not folder.is_dir():
+        raise OutputError(f"{p}: folder '{folder}' does not exist")
+    fd, name = tempfile.mkstemp(prefix=f".{p.name}.", suffix=f".tmp{p.suffix}", dir=folder)
+    return fd, Path(name)
+
+
+@contextlib.contextmanager
+def replacing(path):
+    """Context manager: a temporary path to write, renamed onto ``path`` when the block ends.
+
+    The temporary file is in the same folder (so the rename is atomic) and has
+    the same suffix. On any exception (interrupt included) it is removed and
+    ``path`` is untouched. The new file keeps the permissions of the regular
+    file it replaces, or gets those ``open()`` would give it (``0o666`` less
+    the umask). A write that fails for lack of room (full disk, quota,
+    file-size limit, read-only file system) is :class:`OutputError`
+    ``"<path>: cannot write (<reason>)"``.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     out = pathlib.Path(folder) / "table.csv"
+    ...     with replacing(out) as tmp:
+    ...         _ = tmp.write_text("a,b\\n1,2\\n")
+    ...     print(out.read_text().splitlines(), sorted(q.name for q in out.parent.iterdir()))
+    ['a,b', '1,2'] ['table.csv']
+    """
+    p = Path(path)
+    fd, tmp = _temp_name(p)
+    os.close(fd)
+    with _LOCK:
+        _PENDING.add(str(tmp))
+    try:
+        try:
+            yield tmp
+        except (OSError, RuntimeError) as exc:
+            reason = _write_failure(exc)
+            if reason is None:
+                raise
+            raise OutputError(f"{p}: cannot write ({reason})") from None
+        os.chmod(tmp, _mode_for(p))
+        os.replace(tmp, p)
+    finally:
+        with _LOCK:
+            _PENDING.discard(str(tmp))
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+
+
+def _mode_for(p: Path) -> int:
+    """Permissions of the new file: those of the regular file it replaces, else what ``open()``
+    would give (0o666 less the umask), never mkstemp's 0o600."""
+    import stat
+
+    try:
+        st = os.lstat(p)
+        if stat.S_ISREG(st.st_mode):
+            return stat.S_IMODE(st.st_mode)
+    except OSError:
+        pass
+    umask = os.umask(0)
+    os.umask(umask)
+    return 0o666 & ~umask
+
+
+def _write_failure(exc: BaseException) -> str | None:
+    """The reason of a failed write (full disk, file-size limit, ...), or None for another error.
+
+    h5py reports libhdf5's failures as OSError or RuntimeError with the errno in the text.
+
+    >>> _write_failure(OSError(28, "No space left on device"))
+    'No space left on device'
+    >>> _write_failure(RuntimeError("Can't decrement id ref count (unable to extend file properly, errno = 27, ...)"))
+    'File too large'
+    >>> _write_failure(OSError(2, "No such file or directory")) is None
+    True
+    """
+    import errno
+    import re
+
+    number = getattr(exc, "errno", None)
+    if number is None:
+        found = re.search(r"errno = (\d+)", str(exc))
+        number = int(found.group(1)) if found else None
+    if number in (errno.ENOSPC, errno.EFBIG, errno.EDQUOT, errno.EROFS):
+        return os.strerror(number)
+    return None
+
+
+def write_bytes(path, data: bytes) -> None:
+    """Write ``data`` to ``path`` whole (:func:`replacing`)."""
+    with replacing(path) as tmp, open(tmp, "wb") as handle:
+        handle.write(data)
+
+
+def write_text(path, text: str) -> None:
+    """Write ``text`` (UTF-8) to ``path`` whole (:func:`replacing`)."""
+    write_bytes(path, text.encode("utf-8"))
+
+
+# ------------------------------------------------------------------ interrupts
+
+
+def register_children(pids) -> None:
+    """Worker processes the interrupt watchdog kills should the command not end in time."""
+    with _LOCK:
+        _CHILDREN.update(int(p) for p in pids if p)
+
+
+def _cleanup_and_say() -> None:
+    import signal
+
+    with _LOCK:
+        pending, children = list(_PENDING), list(_CHILDREN)
+    for pid in children:
+        with contextlib.suppress(OSError):
+            os.kill(pid, signal.SIGKILL)
+    for pid in children:  # reaped here: where nothing reaps orphans they would stay as zombies
+        with contextlib.suppress(OSError):
+            os.waitpid(pid, 0)
+    with contextlib.suppress(OSError):
+        while os.waitpid(-1, os.WNOHANG)[0]:  # children that have already ended (forked readers)
+            pass
+    for name in pending:
+        with contextlib.suppress(OSError):
+            os.unlink(name)
+    if not _SAID.is_set():
+        _SAID.set()
+        with contextlib.suppress(OSError):
+            # on a terminal a progress bar may have hidden the cursor and left a partial line
+            prefix = b"\r\x1b[2K\x1b[?25h" if os.isatty(2) else b""
+            os.write(2, prefix + b"guidefit: interrupted\n")
+
+
+def interrupted_exit() -> None:
+    """Say ``guidefit: interrupted`` (once), kill registered workers and end with 130 now.
+
+    ``os._exit``: exit handlers (a process pool joining its workers) cannot
+    make an interrupted command wait.
+    """
+    with contextlib.suppress(Exception):
+        sys.stdout.flush()
+    _cleanup_and_say()
+    os._exit(130)
+
+
+def _watchdog(read_fd: int) -> None:
+    import signal
+    import time
+
+    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})  # signals go to the main thread
+    while True:
+        try:
+            data = os.read(read_fd, 512)
+        except OSError:
+            return
+        if not data:
+            return
+        if signal.SIGINT in data:
+            _INTERRUPTED.set()
+            time.sleep(INTERRUPT_GRACE_S)
+            interrupted_exit()
+
+
+_INTERRUPTED = threading.Event()  # SIGINT received (install_interrupt_handler's handler ran)
+
+
+def interrupted() -> bool:
+    """True once Ctrl-C was received: an error seen after it (an import that the interrupt broke,
+    say, reported as ImportError) is the interrupt, not a fault of the input."""
+    return _INTERRUPTED.is_set()
+
+
+def _raise_interrupt(signum, frame):
+    _INTERRUPTED.set()
+    raise KeyboardInterrupt
+
+
+def install_interrupt_handler() -> None:
+    """The command line's Ctrl-C: see the module docstring. Main thread only.
+
+    A C-level wake-up pipe (:func:`signal.set_wakeup_fd`) tells the watchdog
+    thread at once, even while the main thread is in a long C call.
+    """
+    import signal
+
+    if threading.current_thread() is not threading.main_thread():
+        return
+    read_fd, write_fd = os.pipe()
+    os.set_blocking(write_fd, False)
+    try:
+        signal.set_wakeup_fd(write_fd, warn_on_full_buffer=False)
+    except (ValueError, OSError):
+        os.close(read_fd)
+        os.close(write_fd)
+        return
+    signal.signal(signal.SIGINT, _raise_interrupt)
+    _INSTALLED.set()
+    threading.Thread(target=_watchdog, args=(read_fd,), name="guidefit-interrupt", daemon=True).start()
+
+
+def quiet_worker() -> None:
+    """Initializer of worker processes: Ctrl-C is the parent's to handle (no tracebacks from workers)."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    with contextlib.suppress(ValueError, OSError):
+        signal.set_wakeup_fd(-1)
+
+
+def handler_installed() -> bool:
+    """True in the ``guidefit`` program (:func:`install_interrupt_handler` ran), not under a test runner."""
+    return _INSTALLED.is_set()
+
+
+def quiet_unraisable(*args) -> None:
+    """``sys.unraisablehook`` and ``sys.excepthook`` of the program: a failure while an object
+    is freed after the error was reported (h5py closing a file on a full disk, a generator
+    closed by Ctrl-C) adds no traceback; the command's own message has said what went wrong.
+    (Every exception of a command is turned into one line by the command line itself.)"""
+
+
+def one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """``warnings.showwarning`` of the command line: ``guidefit: warning: <text> (<category>)``.
+
+    Python's form (file path, line number, source line) is not for the user.
+
+    Examples
+    --------
+    >>> import io
+    >>> out = io.StringIO()
+    >>> one_line_warning(RuntimeWarning("invalid value\\nencountered"), RuntimeWarning, "/x/y.py", 3, out)
+    >>> out.getvalue()
+    'guidefit: warning: invalid value encountered (RuntimeWarning)\\n'
+    """
+    text = " ".join(str(message).split()) or category.__name__
+    target = sys.stderr if file is None else file
+    with contextlib.suppress(Exception):
+        target.write(f"guidefit: warning: {text} ({category.__name__})\n")
+
+
+def one_line_logging() -> None:
+    """Library log records that reach Python's last-resort handler (warnings and errors of
+    matplotlib, h5py, ... when nobody configured logging) as ``guidefit: warning: <text>``."""
+    import logging
+
+    handler = logging.StreamHandler()
+    handler.setLevel(logging.WARNING)
+    handler.setFormatter(_OneLineFormatter())
+    logging.lastResort = handler
+
+
+class _OneLineFormatter:
+    def format(self, record) -> str:
+        text = " ".join(record.getMessage().split())
+        return f"guidefit: warning: {text} ({record.name})"
