@@ -202,7 +202,10 @@ class ForwardRequest:
     ``mode_measured_hz``: the measured frequencies; ``model_damping``: per
     model mode the damping ratio of its measured partner (nan unknown);
     ``level_model``: per level the model mode it refers to (-1 none);
-    ``cache``: scratch space for one explain call.
+    ``levels``: the force levels compared (:class:`LevelData`);
+    ``guide``: the guide; ``effects``: every effect of the candidate
+    (:class:`Effect`, this one included); ``cache``: scratch space for one
+    explain call.
     """
 
     guide: object
