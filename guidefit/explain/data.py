@@ -126,6 +126,7 @@ class _Level:
     label: str
     hit: tuple
     run: str | None
+    explicit_hit: bool  # hit point and direction given (else the label's default)
 
 
 def finite_positive(x) -> bool:
@@ -305,22 +306,47 @@ def _checked_level(j: int, lv) -> _Level | None:
     # frequency at F_eff = sqrt(sum F^4 / sum F^2), not at the mean force
     return _Level(f, float(std), max(float(std), FORCE_LEVEL_FLOOR * f), effective_force(forces),
                   float(np.sum(forces**2)), tuple(float(x) for x in forces), band, lab,
-                  (tuple(point), direction, pulse), lv.run)
+                  (tuple(point), direction, pulse), lv.run,
+                  lv.hit_position_m is not None and lv.hit_direction is not None)
+
+
+def experiments(levels: list) -> dict:
+    """Run -> experiment: runs whose hits share point and direction (they differ only in hit force) are one.
+
+    Their force levels are one trend (the issue-16 "levels of one test"): a
+    carriage hit at 100 N, 1 kN and 5 kN in three runs. Without an explicit
+    hit point and direction a run is its own experiment.
+    """
+    out: dict = {}
+    for lv in levels:
+        if lv.explicit_hit:
+            key = ("hit", tuple(np.round(np.asarray(lv.hit[0], float), 4)),
+                   tuple(np.round(np.asarray(lv.hit[1], float), 3)))
+        else:
+            key = ("run", lv.run)
+        out.setdefault(lv.run, key)
+    return out
 
 
 def _grouped_levels(levels: list, labels, runs, notes) -> tuple[LevelData, list]:
-    """The levels used, in (run, label) trend groups of two or more, and their standard deviations as given.
+    """The levels used, in (experiment, label) trend groups of two or more, and their standard deviations as given.
 
-    A label's levels come from the run that gave its mode (the same hits, the
-    same estimator); each (run, label) group is a trend with force, compared
-    after removing its weighted mean.
+    A label's levels come from the experiment (:func:`experiments`: a run, or
+    runs that differ only in hit force) that gave its mode: the same hits,
+    the same estimator; each (experiment, label) group is a trend with
+    force, compared after removing its weighted mean.
     """
+    exp = experiments(levels)
+
+    def experiment(run):
+        return exp.get(run, ("run", run))
+
     by_group: dict = {}
     for j, lv in enumerate(levels):
-        own = {runs[i] for i, ll in enumerate(labels) if ll == lv.label and runs[i] is not None}
-        has_own = any(other.run in own for other in levels if other.label == lv.label)
-        if not has_own or lv.run in own:
-            by_group.setdefault((lv.run, lv.label), []).append(j)
+        own = {experiment(runs[i]) for i, ll in enumerate(labels) if ll == lv.label and runs[i] is not None}
+        has_own = any(experiment(other.run) in own for other in levels if other.label == lv.label)
+        if not has_own or experiment(lv.run) in own:
+            by_group.setdefault((experiment(lv.run), lv.label), []).append(j)
     used = sorted(j for g in by_group.values() if len(g) >= 2 for j in g)
     if len(used) < len(levels):
         notes.append(f"{len(levels) - len(used)} force level(s) not used (another run's estimate of the mode, "
@@ -356,10 +382,11 @@ def _levels_of_modes(f, sigma, labels, runs, levels: LevelData, raw_std, notes):
             js = [j for j, rr in enumerate(levels.run) if rr == runs[i]]
         if lab is None or not js:
             continue
+        own = [j for j in js if levels.label[j] == lab and levels.run[j] == runs[i]]
+        js = own or js  # the hits that made the mode's FRF: its run's levels when it has any
         w = levels.weight[js]
         mode_force[i] = math.sqrt(float(np.sum(w * np.square(levels.force_n[js])) / np.sum(w)))
         mode_levels[i] = js
-        own = [j for j in js if levels.label[j] == lab and levels.run[j] == runs[i]]
         if len(own) >= 2:
             w = levels.weight[own]
             f_lv = float(np.sum(w * levels.frequency_hz[own]) / np.sum(w))
@@ -379,11 +406,12 @@ def nonlinear_runs(levels: LevelData) -> set:
     """Runs whose force levels, as a whole, change with force beyond their uncertainty (p < ACCEPT_P_VALUE)."""
     chi2: dict = {}
     f, sigma = levels.frequency_hz, levels.sigma_hz
-    for g in levels.groups:
+    for g in levels.groups:  # a group of several runs (one experiment) counts for each of them
         w = sigma[g] ** -2.0
         z = (f[g] - np.sum(w * f[g]) / np.sum(w)) / sigma[g]
-        c, n = chi2.get(levels.run[g[0]], (0.0, 0))
-        chi2[levels.run[g[0]]] = (c + float(z @ z), n + len(g) - 1)
+        for run in {levels.run[j] for j in g}:
+            c, n = chi2.get(run, (0.0, 0))
+            chi2[run] = (c + float(z @ z), n + len(g) - 1)
     return {r for r, (c, n) in chi2.items() if n > 0 and p_value(c, n) < ACCEPT_P_VALUE}
 
 

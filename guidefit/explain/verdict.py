@@ -92,8 +92,9 @@ def trend_notes(data) -> list:
         slope = np.sum(w * (x - xm) * y) / sxx
         z = slope * math.sqrt(sxx)
         drop = 100.0 * slope * (x.max() - x.min()) / np.average(y, weights=w)
-        run = data.lv_run[g[0]]
-        out.append(f"{lab}{f' ({run} run)' if run else ''}: frequency changes {drop:+.2f} % from {x.min():.0f} N to "
+        runs = sorted({str(data.lv_run[j]) for j in idx if data.lv_run[j] is not None})
+        where = f" ({', '.join(runs)} run{'s' if len(runs) > 1 else ''})" if runs else ""
+        out.append(f"{lab}{where}: frequency changes {drop:+.2f} % from {x.min():.0f} N to "
                    f"{x.max():.0f} N ({abs(z):.1f} sigma{', significant' if abs(z) > 3 else ''})")
     return out
 
