@@ -141,3 +141,24 @@ def test_runs_that_differ_only_in_hit_force_are_one_trend():
     result = explain_modes(modes, guide, force_levels=levels, candidates=["amplitude_dependence"])
     assert not any(n.startswith("amplitude_dependence not tried") for n in result.notes)
     assert any(c["name"] == "amplitude_dependence" for c in result.candidates)
+
+
+def test_a_model_that_cannot_be_evaluated_has_as_many_residuals_as_one_that_can():
+    """least_squares needs one length: a failed model (a segment with first > last) with shapes and level groups."""
+    from guidefit.explain import synthetic_modes
+    from guidefit.explain.data import prepare
+    from guidefit.explain.evaluation import Context, evaluate
+    from guidefit.model.effects import Effect, make_effect
+    from guidefit.model.guides import load_guide
+    from guidefit.model.vibration import model_from_guide
+
+    guide = load_guide("MRB35")
+    modes, sensors, levels = synthetic_modes(guide, [make_effect("contact_stiffness", {"factor": 0.9})],
+                                             forces=(100.0, 600.0, 1500.0))
+    data = prepare(modes, guide, sensors, levels, [])
+    assert data.lv_groups and data.shapes
+    ctx = Context(guide, model_from_guide(guide))
+    good = evaluate(ctx, data, [make_effect("contact_stiffness", {"factor": 0.9})])
+    bad = evaluate(ctx, data, [Effect("row_segment", {"row": 1, "first": 15.0, "last": 3.0, "factor": 0.5})])
+    assert good.ok and not bad.ok
+    assert bad.r.shape == good.r.shape

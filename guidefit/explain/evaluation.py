@@ -89,7 +89,8 @@ def _forward(ctx: Context, data, effects, spec, sol, pairing):
 
 def _failed(data) -> Evaluation:
     n = data.f.size
-    n_r = data.n_data + int(data.has_shape.sum())  # a shape has n_ch residuals for n_ch - 1 dof
+    # as many residuals as a model that evaluates: frequencies, n_ch per shape, every level
+    n_r = n + sum(int(s.unit.size) for s in data.shapes) + int(data.lv_f.size)
     return Evaluation(np.full(n_r, BAD_RESIDUAL), np.full(n, -1), np.full(n, np.nan), np.full(n, np.nan),
                       np.full(data.lv_f.size, np.nan), None, ok=False)
 
