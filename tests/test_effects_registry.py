@@ -185,3 +185,40 @@ def test_forward_request_docstring_names_every_field():
     doc = fx.ForwardRequest.__doc__
     for name in fx.ForwardRequest.__dataclass_fields__:
         assert f"``{name}``" in doc, name
+
+
+def test_an_effect_gathers_its_own_data_from_the_identification(monkeypatch):
+    """``prepare``: explain_identification asks every candidate effect for the data it needs."""
+    from dataclasses import replace as dc_replace
+
+    from guidefit.errors import IdentificationError
+    from guidefit.explain import explain_identification, synthetic_modes
+
+    modes, _, _ = synthetic_modes(GUIDE, [make_effect("contact_stiffness", {"factor": 0.9})], seed=4)
+
+    class FakeIdentification:
+        file = "fake.h5"
+        guide = GUIDE
+
+        def to_dict(self):
+            return {"guide": "MRB35", "modes": [{"label": m.label, "frequency_hz": m.frequency_hz,
+                                                 "frequency_std_hz": m.frequency_std_hz} for m in modes]}
+
+    seen = []
+
+    def drop_roll_high(identification, got_modes, levels, notes):
+        seen.append(identification.file)
+        notes.append("toy: roll_high left to another test")
+        return [m for m in got_modes if m.label != "roll_high"], levels
+
+    def fails(identification, got_modes, levels, notes):
+        raise IdentificationError("no runs that differ only in hit force")
+
+    monkeypatch.setitem(EFFECTS, "contact_stiffness", dc_replace(EFFECTS["contact_stiffness"], prepare=drop_roll_high))
+    monkeypatch.setitem(EFFECTS, "added_mass", dc_replace(EFFECTS["added_mass"], prepare=fails))
+    result = explain_identification(FakeIdentification(), candidates=["contact_stiffness", "added_mass"])
+    assert seen == ["fake.h5"]
+    assert "roll_high" not in {m["label"] for m in result.modes} and len(result.modes) == 4
+    assert "toy: roll_high left to another test" in result.notes
+    assert any(n.startswith("added_mass: its data could not be gathered") for n in result.notes)
+    assert result.verdict == "explained" and result.effects[0]["name"] == "contact_stiffness"

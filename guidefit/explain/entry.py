@@ -10,9 +10,35 @@ from guidefit.explain.modes_json import level_from, modes_from_result, read_mode
 from guidefit.explain.pipeline import explain_modes
 
 
+def _effects_prepare(identification, candidates, modes: list, levels: list, notes: list):
+    """Let each candidate effect with a ``prepare`` hook gather its data from the identification.
+
+    An effect may need more than identify's modes and force levels, e.g.
+    ``amplitude_dependence`` the force levels across runs that differ only in
+    hit force (:class:`~guidefit.model.effects.EffectDef`, ``prepare``); a
+    hook that fails on these data leaves a note, not an error.
+    """
+    from guidefit.errors import GuidefitError
+    from guidefit.model.effects import ALIASES, EFFECTS
+
+    if candidates is None:
+        names = list(EFFECTS)
+    else:  # an unknown name is explain_modes' error to report
+        names = [ALIASES.get(n, n) for n in candidates if n in EFFECTS or n in ALIASES]
+    for name in names:
+        hook = EFFECTS[name].prepare
+        if hook is None:
+            continue
+        try:
+            modes, levels = hook(identification, modes, levels, notes)
+        except GuidefitError as exc:
+            notes.append(f"{name}: its data could not be gathered from the identification: {exc}")
+    return modes, levels
+
+
 def explain_identification(identification, candidates=None, progress=None) -> Explanation:
     """Explain the modes of an :class:`~guidefit.identify.Identification` (modes, extra modes,
-    sensors and force levels of its JSON form)."""
+    sensors and force levels of its JSON form, and what the candidate effects' ``prepare`` hooks gather)."""
     data = identification.to_dict()
     where = str(identification.file)
     raw_levels = data.pop("force_levels", None) or []
@@ -23,6 +49,7 @@ def explain_identification(identification, candidates=None, progress=None) -> Ex
             levels.append(level_from(entry, f"{where}: force_levels entry {k}"))
         except RecordingError as exc:
             notes.append(f"force level skipped: {exc}")
+    modes, levels = _effects_prepare(identification, candidates, modes, levels, notes)
     return explain_modes(modes, identification.guide, sensors, levels, candidates=candidates,
                          progress=progress, source=where, notes=notes)
 
