@@ -134,6 +134,7 @@ def test_runs_that_differ_only_in_hit_force_are_one_trend():
     assert data.mode_levels == [[0], [1], [2]]
     np.testing.assert_allclose(data.mode_force, forces, rtol=1e-12)
     chi2, dof, p = level_trend(data)
+    assert chi2 > 100.0
     assert dof == 2 and p < 1e-6
     notes: list = []
     plain = prepare(modes, guide, [], [replace(lv, hit_position_m=None, hit_direction=None) for lv in levels], notes)
