@@ -71,10 +71,23 @@ def equal_notes(best: dict, others: list, what: str) -> list:
     same = all(e["name"] == best["name"] for e in others)
     out = [f"{' and '.join(names)} {what} (delta BIC {gap:.1f})"
            + ("" if same else "; the data cannot tell these effects apart")]
-    corners = [n for n in names if n in {f"added_mass (at {c})" for c in "ABCD"}]
-    if len(corners) > 1:
-        out.append("a mass at A, B, C or D gives identical frequencies (mirror symmetry); "
-                   "only mode shapes at A-D tell which corner")
+    return out + _ambiguity_notes([best, *others])
+
+
+def _ambiguity_notes(entries: list) -> list:
+    """The effects' own notes (registry ``ambiguity``) on several of their variants being equally good."""
+    from guidefit.model.effects import EFFECTS, resolve_name
+
+    tags: dict = {}
+    for e in entries:
+        if len(e["effects"]) == 1:
+            tags.setdefault(e["effects"][0]["name"], []).append(e["effects"][0]["variant"])
+    out = []
+    for name, found in tags.items():
+        rule = EFFECTS[resolve_name(name)].ambiguity
+        note = rule(found) if rule is not None and len(found) > 1 else None
+        if note:
+            out.append(note)
     return out
 
 

@@ -297,6 +297,10 @@ class EffectDef:
         :class:`~guidefit.explain.MeasuredMode`, ``levels``
         :class:`~guidefit.explain.ForceLevel`; a
         :class:`~guidefit.errors.GuidefitError` becomes a note.
+    ambiguity : callable, optional
+        ``ambiguity(tags) -> str | None``: a note for when several of its
+        variants (their tags) explain the data equally well (e.g. the
+        mirror-symmetric corners of ``added_mass``).
     aliases : tuple of str
         Other names ``--effect``, ``make_effect`` and JSON readers accept.
     nonlinear : bool
@@ -316,6 +320,7 @@ class EffectDef:
     forward: Callable | None = None
     accept: Callable | None = None
     prepare: Callable | None = None
+    ambiguity: Callable | None = None
     aliases: tuple = ()
     nonlinear: bool = False
 
