@@ -1,0 +1,119 @@
+"""identify end to end on a 100-hit, 0.5 s, 200 kHz recording against the read + one-FFT floor.
+
+Issue 13's budget: ``guidefit.identify`` on a 100-hit, 0.5 s, 200 kHz
+recording (force + 4 accelerometers, float32, one vertical run) within 1.5x
+the time of a process that only reads the hits and makes one real FFT pass
+(``floor32`` of bench_frf.py). The file is the one bench_frf.py writes
+(simulated hits tiled with random gains). Each variant runs in its own
+child process, round after round (median shown); imports are excluded from
+the timed work, the page cache is warm.
+
+Variants:
+
+floor (float32)
+    bench_frf.py's ``w_floor32``: h5py ``ds[i]`` per hit + ``scipy.fft.rfft``.
+guidefit FRF only
+    ``compute_frf(run, iter_hits(run))`` (bench_frf.py's ``w_guidefit``).
+identify
+    ``guidefit.identify(path)``: hits, checks, FRFs with the jackknife sums,
+    the global modal fit (LSCF diagram, refinement, jackknife over hit
+    groups), shapes, labels, sensor check, gate, Eq. (24)-(29).
+
+Run: ``python benchmarks/bench_identify_e2e.py [--quick] [--repeat N]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import _common as C  # noqa: E402
+import bench_frf as F  # noqa: E402
+
+SCRIPT = Path(__file__).resolve()
+
+
+def w_identify(path):
+    from guidefit.identify import IdentifySettings, identify
+    from guidefit.model.guides import load_guide
+
+    guide = load_guide("MRB35")
+    t = time.perf_counter()
+    result = identify(path, guide=guide, settings=IdentifySettings())
+    dt = time.perf_counter() - t
+    f_v = next((m.frequency_hz for m in result.modes if m.label == "vertical"), float("nan"))
+    return {"seconds": dt, "f_V_hz": f_v, "n_modes": len(result.modes), "gate": result.gate}
+
+
+WORKERS = {"floor32": F.w_floor32, "frf": F.w_guidefit, "identify": w_identify}
+LABELS = {"floor32": "floor (float32): read + one rfft pass", "frf": "guidefit FRF only (compute_frf)",
+          "identify": "guidefit identify, end to end"}
+
+
+def run_once(name: str, path: Path) -> dict:
+    m = C.measure(C.python_cmd(SCRIPT, "--worker", name, str(path)))
+    if m["returncode"] != 0 or m["child"] is None:
+        raise RuntimeError(f"variant {name} failed:\n{m['stderr'][-2000:]}")
+    return m
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="20 hits")
+    ap.add_argument("--repeat", type=int, default=None, help="rounds (median shown; default 3, 1 with --quick)")
+    ap.add_argument("--worker", nargs=2, metavar=("VARIANT", "FILE"), help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.worker:
+        name, path = args.worker
+        F.w_imports(path)
+        import guidefit.globalfit  # noqa: F401
+        import guidefit.identify  # noqa: F401
+
+        cpu0 = C.cpu_times()
+        out = WORKERS[name](path)
+        out["cpu_s"] = C.cpu_times() - cpu0
+        C.emit(out)
+        return
+    n_sim, n_hits = (4, 20) if args.quick else (10, 100)
+    repeat = args.repeat or (1 if args.quick else 3)
+    C.print_machine()
+    C.BENCH_DIR.mkdir(parents=True, exist_ok=True)
+    path = C.BENCH_DIR / f"e2e_{n_hits}hits.h5"
+    with C.progress() as bar:
+        if not path.exists():
+            records, header, _ = C.simulated_hits(n_sim, F.RECORD_S)
+            C.write_hits_file(path, records, header, n_hits, bar)
+        with open(path, "rb") as fh:  # into the page cache
+            while fh.read(1 << 24):
+                pass
+        task = bar.add_task("variants", total=len(WORKERS) * repeat)
+        runs = {name: [] for name in WORKERS}
+        for k in range(repeat):
+            for name in WORKERS:
+                bar.update(task, description=f"{name}, round {k + 1}/{repeat}")
+                runs[name].append(run_once(name, path))
+                bar.advance(task)
+    res = {name: sorted(ms, key=lambda m: m["child"]["seconds"])[len(ms) // 2] for name, ms in runs.items()}
+    floor = res["floor32"]["child"]["seconds"]
+    rows = []
+    for name, m in res.items():
+        s = m["child"]["seconds"]
+        rows.append([LABELS[name], f"{s:.2f}", ", ".join(f"{x['child']['seconds']:.2f}" for x in runs[name]),
+                     f"{m['child']['cpu_s']:.2f}", f"{s / floor:.2f}", f"{m['rss_mb']:.0f}"])
+    print(f"{n_hits} hits x {F.RECORD_S} s x 5 channels at {F.FS / 1e3:.0f} kHz, float32, page cache warm; "
+          f"median of {repeat} round(s), variants interleaved\n")
+    print(C.md_table(["variant", "s", "runs (s)", "CPU s", "x floor", "peak RSS MB"], rows))
+    ident = res["identify"]["child"]
+    ratio = ident["seconds"] / floor
+    print(f"\nidentify: f_V = {ident['f_V_hz']:.2f} Hz, {ident['n_modes']} modes, gate: {ident['gate']}")
+    print(f"target: identify within 1.5x the floor: {ratio:.2f}x -> {'met' if ratio <= 1.5 else 'NOT met'}")
+    C.print_load()
+    path.unlink(missing_ok=True)
+
+
+if __name__ == "__main__":
+    main()
