@@ -1,0 +1,507 @@
+r"""Nonlinear contacts: a forward model of hits at several force levels.
+
+A preloaded Hertz roller (Palmgren, Eq. 4: ``Q = C delta^(10/9)`` for
+``delta > 0``, see :mod:`guidefit.model.static`) softens as a hit unloads it
+and carries nothing once it lifts off. A carriage hit harder and harder
+therefore rings at a lower and lower *apparent* frequency: with the MRB35
+preload, hits of about 1 kN and more lift whole rows, and the vertical peak
+of a 5 kN hit is skewed and split. What a modal fit of such a peak finds is
+not a property of the carriage alone; it depends on the hit, on the windows,
+on the FRF estimator and on the fit. So the measurement is compared with a
+simulation of the same experiment, passed through the same chain:
+
+1. **Measured levels** (:func:`measure_levels`). Runs that differ only in hit
+   force (the same hit point, direction and sensors) are levels of one test;
+   a run whose hit forces spread by :data:`FORCE_RATIO` is split into force
+   terciles. Each level's hits are averaged with the run's windows and
+   estimator (:func:`guidefit.frf.compute_frf`), and the mode is fitted with
+   one pole (:func:`apparent_mode`, :func:`guidefit.modes.fit_modes`) in a
+   band of +/- max(3 zeta, 3 %) around its peak on that level (the peak
+   found between 0.6 and 1.03 times the mode's small-amplitude frequency):
+   the apparent frequency and damping of that level.
+2. **Forward model** (:class:`ForwardModel`). For a preload factor ``p``
+   (``Delta' = p Delta``) and a roller-stiffness factor ``k`` (``K_n`` scaled),
+   each level's hits are simulated in the time domain with the preloaded
+   Hertz law (:func:`guidefit.simulate.hit_response`, the simulator's RK4
+   integrator, exact linear decay once every roller's excursion is below
+   1 % of the preload) at the measured peak forces (up to
+   :data:`SIM_HITS` hits, the force quantiles of the level), the measured
+   pulse duration, hit point and direction, at the sensors' positions and
+   axes, for the measured record length and pretrigger, at a sample rate of
+   at least :data:`SIM_RATE_MIN_HZ` (an integer fraction of the measured one,
+   so the FRF has the same bins). The records go through the same windows
+   (the measured run's force window and exponential window), the same
+   estimator and the same one-pole fit in the same band as the measurement.
+   Results are cached by parameters.
+3. **Fit** (:func:`fit_levels`). ``ln p`` (and ``ln k``, fixed mainly by the
+   lowest level, where the contacts are linear) are fitted to the levels'
+   apparent frequencies by :func:`scipy.optimize.least_squares`; the standard
+   deviations come from the Jacobian, ``cov = (J^T J)^-1 max(1, chi2/dof)``.
+   Each level's uncertainty is the one-pole fit's standard deviation with a
+   floor of :data:`LEVEL_FLOOR` of the frequency (the model-form floor of
+   explain) and the forward model's own numerical error
+   (:data:`FORWARD_MODEL_ERROR`, measured against the full simulation chain by
+   ``benchmarks/bench_nonlinear.py``). The first guess is a coarse grid over
+   ``p`` with one simulated hit per level.
+
+The describing function of :mod:`guidefit.explain` (the RMS of the modal
+amplitudes in a narrow band around the small-amplitude frequency) is accurate
+below lift-off only: 0.2 % off at 1 kN and 1.9 % at 5 kN on the MRB35 (table
+in ``docs/explain.md``, "Nonlinear contacts: the forward model").
+
+Examples
+--------
+>>> from guidefit.nonlinear import apparent_mode
+>>> import numpy as np
+>>> f = np.linspace(3000.0, 4000.0, 201)
+>>> s = 2j * np.pi * f
+>>> p = -0.03 * 2 * np.pi * 3500 + 2j * np.pi * 3500 * np.sqrt(1 - 0.03**2)
+>>> H = s**2 * (1 / (s - p) + 1 / (s - np.conj(p)))
+>>> fit = apparent_mode(f, H[:, None], (3200.0, 3800.0))
+>>> round(fit.frequency_hz, 1), round(fit.damping_ratio, 4)
+(3500.0, 0.03)
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from guidefit.errors import IdentificationError, ModelError
+
+#: Runs (or hit-force bins) form levels when their forces differ by at least this factor.
+FORCE_RATIO = 1.5
+#: Hits simulated per level by the forward model (the quantiles of the level's measured forces).
+SIM_HITS = 3
+#: Lowest sample rate of the forward model (Hz): RK4 step and harmonics of the lift-off.
+SIM_RATE_MIN_HZ = 80e3
+#: Relative floor of a level's frequency uncertainty (the model-form floor of explain, 0.05 %).
+LEVEL_FLOOR = 5e-4
+#: Relative numerical error of the forward model against the full simulation chain (bench_nonlinear.py).
+FORWARD_MODEL_ERROR = 5e-4
+#: Band half-width of the one-pole fit: max(BAND_ZETAS zeta, BAND_MIN) of the peak frequency.
+BAND_ZETAS, BAND_MIN = 3.0, 0.03
+#: The peak of a level is searched between these factors of the mode's small-amplitude frequency.
+PEAK_SEARCH = (0.6, 1.03)
+
+
+@dataclass(frozen=True)
+class ModeFit:
+    """One-pole fit of a level's mode: frequency (Hz), its std and the damping ratio."""
+
+    frequency_hz: float
+    frequency_std_hz: float | None
+    damping_ratio: float
+
+
+@dataclass(frozen=True)
+class LevelSetup:
+    """How one force level was measured: what the forward model reproduces.
+
+    Positions in m (carriage frame), times in s; ``positions_m`` and
+    ``directions`` are those of the response channels, in FRF order.
+    """
+
+    sample_rate_hz: float
+    n_samples: int
+    pretrigger_samples: int
+    channel_names: tuple
+    positions_m: np.ndarray
+    directions: np.ndarray
+    hit_position_m: tuple
+    hit_direction: tuple
+    pulse_s: float
+    force_window_s: float | None
+    exp_tau_s: float | None
+    estimator: str = "H1"
+
+
+@dataclass(frozen=True)
+class MeasuredLevel:
+    """The apparent frequency of one mode on one force level (its hits averaged)."""
+
+    run: str
+    label: str
+    hit_forces_n: tuple
+    frequency_hz: float
+    frequency_std_hz: float | None
+    damping_ratio: float
+    band_hz: tuple
+    setup: LevelSetup = field(repr=False)
+
+    @property
+    def peak_force_n(self) -> float:
+        """Mean peak force of the level's hits (N)."""
+        return float(np.mean(self.hit_forces_n))
+
+    def sigma_hz(self) -> float:
+        """Uncertainty of the level in the fit: fit std, :data:`LEVEL_FLOOR`, :data:`FORWARD_MODEL_ERROR`."""
+        std = self.frequency_std_hz if self.frequency_std_hz and math.isfinite(self.frequency_std_hz) else 0.0
+        return math.sqrt(std**2 + (LEVEL_FLOOR * self.frequency_hz) ** 2
+                         + (FORWARD_MODEL_ERROR * self.frequency_hz) ** 2)
+
+
+# --------------------------------------------------------------------------- the estimator
+
+
+def _window_correction(fit: ModeFit, exp_tau_s: float | None) -> ModeFit:
+    from guidefit import frf as frf_mod
+
+    if not exp_tau_s or not math.isfinite(exp_tau_s):
+        return fit
+    f, z = frf_mod.exponential_window_damping_correction(fit.damping_ratio, fit.frequency_hz, exp_tau_s)
+    return ModeFit(float(f), fit.frequency_std_hz, float(z))
+
+
+def apparent_mode(frequency_hz, H, band_hz, exp_tau_s: float | None = None) -> ModeFit:
+    """One pole fitted to every channel of an FRF in ``band_hz``: the level's apparent mode.
+
+    :func:`guidefit.modes.fit_modes` with one mode (channels scaled alike,
+    residual terms for the modes outside the band); with ``exp_tau_s`` the
+    exponential window's damping is removed
+    (:func:`guidefit.frf.exponential_window_damping_correction`), as identify
+    does. The same function estimates the measured and the simulated levels.
+
+    Raises :class:`~guidefit.errors.IdentificationError` when no pole is found.
+    """
+    import warnings
+
+    from guidefit import modes as modes_mod
+
+    f = np.asarray(frequency_hz, float)
+    H = np.asarray(H)
+    if H.ndim == 1:
+        H = H[:, None]
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            mode = modes_mod.fit_modes(f, H, tuple(band_hz), 1)[0]
+    except (ValueError, np.linalg.LinAlgError) as exc:
+        raise IdentificationError(f"no mode in {band_hz[0]:.0f}-{band_hz[1]:.0f} Hz ({exc})") from None
+    fit = ModeFit(float(mode.frequency_hz), mode.frequency_std_hz, float(mode.damping_ratio))
+    return _window_correction(fit, exp_tau_s)
+
+
+def level_band(frequency_hz, H, mode_hz: float, damping_ratio: float, weights=None) -> tuple[float, float]:
+    """Band of a level's one-pole fit: +/- max(3 zeta, 3 %) around its peak.
+
+    The peak is the largest of ``sum_r w_r |H_r|^2`` between
+    :data:`PEAK_SEARCH` times ``mode_hz`` (the mode's small-amplitude
+    frequency): contact loss only lowers it. ``weights``: per channel
+    (default: the channels' share in the mode, or equal).
+
+    >>> f = np.linspace(2000.0, 4000.0, 401)
+    >>> H = 1.0 / (1.0 - (f / 3000.0) ** 2 + 0.06j * f / 3000.0)
+    >>> [round(x) for x in level_band(f, H[:, None], 3500.0, 0.02)]
+    [2910, 3090]
+    """
+    f = np.asarray(frequency_hz, float)
+    H = np.asarray(H)
+    if H.ndim == 1:
+        H = H[:, None]
+    w = np.ones(H.shape[1]) if weights is None else np.asarray(weights, float)
+    sel = (f >= PEAK_SEARCH[0] * mode_hz) & (f <= PEAK_SEARCH[1] * mode_hz)
+    if not np.any(sel):
+        raise IdentificationError(f"no FRF bins near {mode_hz:.0f} Hz")
+    power = (np.abs(H[sel]) ** 2) @ w
+    peak = float(f[sel][int(np.argmax(power))])
+    half = max(BAND_ZETAS * damping_ratio, BAND_MIN) * peak
+    return peak - half, peak + half
+
+
+# --------------------------------------------------------------------------- forward model
+
+
+def _rate_step(setup: LevelSetup) -> int:
+    """Integer decimation of the measured sample rate down to at least :data:`SIM_RATE_MIN_HZ`."""
+    k = max(1, int(setup.sample_rate_hz // SIM_RATE_MIN_HZ))
+    while k > 1 and (setup.n_samples % k or setup.pretrigger_samples % k):
+        k -= 1
+    return k
+
+
+def representative_forces(hit_forces_n, n_hits: int = SIM_HITS) -> np.ndarray:
+    """Up to ``n_hits`` peak forces standing for a level's hits: their quantiles (N).
+
+    >>> representative_forces([90.0, 100.0, 110.0, 120.0], 2).tolist()
+    [95.0, 115.0]
+    """
+    forces = np.sort(np.asarray(hit_forces_n, float))
+    if forces.size <= n_hits:
+        return forces
+    return np.quantile(forces, (np.arange(n_hits) + 0.5) / n_hits)
+
+
+def simulate_level(model, level: MeasuredLevel, n_hits: int = SIM_HITS):
+    """Ideal records of a level's hits from the model: ``(records (h, n, 1 + R), sample_rate_hz, pretrigger)``.
+
+    ``model``: :func:`guidefit.simulate.build_model` (nonlinear contacts).
+    Column 0 is the force, then the response channels of the level's setup;
+    the record lasts as long as the measured one, at the measured sample rate
+    divided by an integer (:func:`_rate_step`), so the FRF bins coincide.
+    """
+    from guidefit.simulate import hit_response
+
+    s = level.setup
+    k = _rate_step(s)
+    fs, n, pre = s.sample_rate_hz / k, s.n_samples // k, s.pretrigger_samples // k
+    t = np.arange(n) / fs
+    onset = max(pre - 0.5, 0.0) / fs
+    records = []
+    for force in representative_forces(level.hit_forces_n, n_hits):
+        f, acc = hit_response(model, s.hit_position_m, s.hit_direction, [(float(force), onset, s.pulse_s)], t,
+                              s.positions_m, s.directions)
+        records.append(np.column_stack([f, acc]))
+    return np.stack(records), fs, pre
+
+
+def predict_level(model, level: MeasuredLevel, n_hits: int = SIM_HITS) -> ModeFit:
+    """The apparent mode of a level predicted by ``model``: its simulated hits through the measurement's
+    windows, estimator and one-pole fit in the level's band."""
+    from guidefit.frf import WindowSettings, frf_from_records
+
+    s = level.setup
+    records, fs, pre = simulate_level(model, level, n_hits)
+    window = WindowSettings(force_window_s=s.force_window_s or math.inf, exp_tau_s=s.exp_tau_s or math.inf)
+    frf = frf_from_records(records, fs, 0, ("force", *s.channel_names), s.estimator, window,
+                           pretrigger_samples=pre, run=level.run, workers=1)
+    return apparent_mode(frf.frequency_hz, frf.H, level.band_hz, s.exp_tau_s)
+
+
+class ForwardModel:
+    """Predicted apparent modes of measured levels for (preload factor, roller-stiffness factor).
+
+    Parameters
+    ----------
+    guide : Guide or str
+    levels : list of MeasuredLevel
+    n_hits : int
+        Hits simulated per level.
+    damping : dict, optional
+        Modal damping ratio per mode label (default: each label's measured
+        damping on its lowest level, else :data:`guidefit.simulate.DEFAULT_DAMPING`).
+    effects : tuple
+        Other (linear) effects of the model, e.g. an added mass.
+
+    ``predict(p, k)`` is cached by parameters; ``evaluations`` counts the
+    simulations, ``seconds`` their process time.
+    """
+
+    def __init__(self, guide, levels, n_hits: int = SIM_HITS, damping: dict | None = None, effects=()):
+        from guidefit.simulate import _as_guide
+
+        self.guide = _as_guide(guide)
+        self.levels = list(levels)
+        self.n_hits = int(n_hits)
+        self.effects = tuple(effects)
+        if damping is None:
+            damping = {}
+            for lv in sorted(self.levels, key=lambda x: x.peak_force_n, reverse=True):
+                if 0 < lv.damping_ratio < 0.5:
+                    damping[lv.label] = lv.damping_ratio  # the lowest level comes last and wins
+        self.damping = dict(damping)
+        self._cache: dict = {}
+        self.evaluations = 0
+        self.seconds = 0.0
+
+    def model(self, preload_factor: float, kn_factor: float = 1.0):
+        """The simulator's model with nonlinear contacts at these parameters."""
+        from guidefit.model.effects import Effect
+        from guidefit.simulate import build_model
+
+        effects = [*self.effects, Effect("contact_stiffness", {"factor": float(kn_factor)}),
+                   Effect("amplitude_dependence", {"preload_factor": float(preload_factor)})]
+        return build_model(self.guide, effects, self.damping)
+
+    def predict(self, preload_factor: float, kn_factor: float = 1.0, n_hits: int | None = None) -> list[ModeFit]:
+        """Apparent mode of every level (ModeFit list, level order)."""
+        n_hits = self.n_hits if n_hits is None else int(n_hits)
+        key = (round(math.log(preload_factor), 12), round(math.log(kn_factor), 12), n_hits)
+        if key not in self._cache:
+            t0 = time.process_time()
+            model = self.model(preload_factor, kn_factor)
+            self._cache[key] = [predict_level(model, lv, n_hits) for lv in self.levels]
+            self.evaluations += 1
+            self.seconds += time.process_time() - t0
+        return self._cache[key]
+
+    def small_amplitude_hz(self, preload_factor: float, kn_factor: float = 1.0) -> dict:
+        """Linearised (small-amplitude) frequency per mode label (Hz)."""
+        sol = self.model(preload_factor, kn_factor).solution
+        return {lab: float(f) for lab, f in zip(sol.labels, sol.frequencies_hz)}
+
+
+# --------------------------------------------------------------------------- measured levels
+
+
+def pulse_duration(force_n, sample_rate_hz: float) -> float:
+    """Duration T (s) of the half-sine with the same impulse and peak as a measured pulse.
+
+    ``int F dt = 2 F0 T / pi`` over the main pulse (above 5 % of the peak and
+    its continuation down to zero).
+
+    >>> t = np.arange(100) / 200e3
+    >>> f = np.where(t < 1e-4, 300.0 * np.sin(np.pi * t / 1e-4), 0.0)
+    >>> round(pulse_duration(f, 200e3) * 1e6, 1)
+    100.0
+    """
+    f = np.asarray(force_n, float)
+    p = int(np.argmax(f))
+    if f[p] <= 0:
+        raise IdentificationError("no positive force pulse")
+    lo = p
+    while lo > 0 and f[lo - 1] > 0:
+        lo -= 1
+    hi = p
+    while hi < f.size - 1 and f[hi + 1] > 0:
+        hi += 1
+    return float(math.pi * np.sum(f[lo:hi + 1]) / sample_rate_hz / (2.0 * f[p]))
+
+
+def _group_key(run, channels) -> tuple:
+    pos = run.excitation_position_m
+    pos = None if pos is None else tuple(np.round(np.asarray(pos, float), 4))
+    return (pos, tuple(np.round(np.asarray(run.excitation_direction, float), 3)),
+            tuple(ch.name for ch in channels), float(run.sample_rate_hz), int(run.n_samples))
+
+
+def _bins(rows, force_bins: int) -> list:
+    """Hit indices and forces of a run's force bins: terciles when the forces spread, else one bin."""
+    accepted = [r for r in rows if r["accepted"]]
+    forces = np.array([r["peak_force_n"] for r in accepted])
+    if forces.size >= 2 * force_bins and forces.max() >= FORCE_RATIO * forces.min():
+        parts = np.array_split(np.argsort(forces), force_bins)
+    else:
+        parts = [np.arange(forces.size)]
+    return [({accepted[i]["hit"] for i in part}, forces[part]) for part in parts if part.size]
+
+
+def _bin_frf(run, rr, wanted: set, whole: bool):
+    """FRF of a bin's hits with the run's windows (the run's own FRF when the bin is the run) and
+    the bin's pulse duration and (record length, pretrigger) in samples."""
+    from guidefit import frf as frf_mod
+    from guidefit.hits import HitSettings, iter_hits
+
+    frf = rr.frf
+    pulses, hits, shape = [], [], (0, 0)
+    for h in iter_hits(run, HitSettings()):
+        if h.index in wanted and h.accepted:
+            pulses.append(pulse_duration(h.data[:, run.force_index], run.sample_rate_hz))
+            shape = (h.data.shape[0], int(h.pretrigger_samples or 0))
+            if not whole:
+                hits.append(h)
+    if not pulses:
+        raise IdentificationError(f"run '{run.name}': no accepted hit in the force bin")
+    if not whole:
+        window = frf_mod.WindowSettings(force_window_s=frf.force_window_s or math.inf,
+                                        exp_tau_s=frf.exp_window_tau_s or math.inf)
+        frf = frf_mod.compute_frf(run, hits, estimator=frf.estimator, window=window, workers=1)
+    return frf, float(np.median(pulses)), shape
+
+
+def measure_levels(identification, labels=("vertical",), force_bins: int = 3, notes: list | None = None):
+    """The apparent frequency of each labelled mode on each force level of an identification.
+
+    Runs with the same hit point, direction, sensors, sample rate and record
+    length are one test; each run is a level, or three (force terciles) when
+    its own hit forces spread by :data:`FORCE_RATIO`. A group needs levels
+    whose mean forces differ by that factor. A mode is followed from its
+    identified frequency and damping on the group's lowest level (label from
+    identify); on each level it is fitted by :func:`apparent_mode` in the
+    band of :func:`level_band` (channels weighted by the mode's shape).
+
+    Returns a list of :class:`MeasuredLevel` (grouped by test, then label,
+    forces increasing); problems go to ``notes``.
+    """
+    from guidefit.recording import read_recording
+
+    notes = [] if notes is None else notes
+    recording = read_recording(identification.file)
+    groups: dict = {}
+    for rr in identification.runs:
+        run = recording.run(rr.name)
+        groups.setdefault(_group_key(run, rr.channels), []).append((run, rr))
+    out = []
+    for members in groups.values():
+        bins = [(run, rr, wanted, forces, len(_bins(rr.hits, force_bins)) == 1)
+                for run, rr in members for wanted, forces in _bins(rr.hits, force_bins)]
+        means = [float(np.mean(b[3])) for b in bins]
+        if len(bins) < 2 or max(means) < FORCE_RATIO * min(means):
+            continue
+        bins = [bins[i] for i in np.argsort(means)]
+        low_rr = bins[0][1]
+        for label in labels:
+            mode = next((m for m in low_rr.modes if m.label == label), None)
+            if mode is None:
+                notes.append(f"force levels of run '{low_rr.name}': no {label} mode on the lowest level")
+                continue
+            out += _measure_mode(bins, mode, notes)
+    return out
+
+
+def _measure_mode(bins, mode, notes: list) -> list:
+    names = [ch.name for ch in bins[0][1].channels]
+    weights = np.array([abs(mode.shape.get(n, 0.0)) for n in names]) ** 2
+    out = []
+    for run, rr, wanted, forces, whole in bins:
+        try:
+            frf, pulse, (n_samples, pretrigger) = _bin_frf(run, rr, wanted, whole)
+            band = level_band(frf.frequency_hz, frf.H, mode.frequency_hz, mode.damping_ratio, weights)
+            fit = apparent_mode(frf.frequency_hz, frf.H, band, frf.exp_window_tau_s)
+        except IdentificationError as exc:
+            notes.append(f"force level of run '{run.name}' at {np.mean(forces):.0f} N: {exc}")
+            continue
+        channels = rr.channels
+        setup = LevelSetup(
+            sample_rate_hz=float(run.sample_rate_hz), n_samples=int(n_samples),
+            pretrigger_samples=int(pretrigger), channel_names=tuple(frf.channels),
+            positions_m=np.array([ch.position_m for ch in channels], float),
+            directions=np.array([ch.direction for ch in channels], float),
+            hit_position_m=tuple(float(x) for x in (run.excitation_position_m
+                                                    if run.excitation_position_m is not None else (0, 0, 0))),
+            hit_direction=tuple(float(x) for x in run.excitation_direction), pulse_s=pulse,
+            force_window_s=frf.force_window_s, exp_tau_s=frf.exp_window_tau_s, estimator=frf.estimator)
+        out.append(MeasuredLevel(run.name, mode.label, tuple(float(x) for x in np.sort(forces)),
+                                 fit.frequency_hz, fit.frequency_std_hz, fit.damping_ratio,
+                                 tuple(float(x) for x in band), setup))
+    return out
+
+
+# --------------------------------------------------------------------------- test recordings
+
+
+def simulate_force_levels(guide="MRB35", effects=(), forces_n=(100.0, 1000.0, 5000.0), hits: int = 4,
+                          record_s: float = 0.05, spread: float = 0.05, seed: int = 0, ideal: bool = False,
+                          run_name: str = "vertical"):
+    """A recording of one hammer set-up hit at several force levels, one run per level.
+
+    Each level is a :func:`guidefit.simulate.simulate` run (``run_name`` of
+    :data:`guidefit.simulate.DEFAULT_RUNS`, renamed ``<run>_<F>N``) with peak
+    forces drawn in ``F (1 +/- spread)`` and the ADC ranges set as an
+    experimenter would for that force (force range the next power of two
+    above 1.5 F, at least 2048 N; acceleration range half that in m/s^2), so
+    nothing clips. Returns ``(RecordingData, truth per level)``.
+    """
+    from dataclasses import replace
+
+    from guidefit.recording import RecordingData
+    from guidefit.simulate import DEFAULT_RUNS, SimulationConfig, simulate
+
+    base = {r.name: r for r in DEFAULT_RUNS}
+    if run_name not in base:
+        raise ModelError(f"run '{run_name}' unknown; have {', '.join(base)}")
+    runs, truths = [], {}
+    for level, force in enumerate(forces_n):
+        full = max(2048.0, 2.0 ** math.ceil(math.log2(1.5 * force)))
+        name = f"{run_name}_{force:g}N"
+        cfg = SimulationConfig(runs=(replace(base[run_name], name=name),), hits=hits, record_s=record_s,
+                               force_n=(force * (1 - spread), force * (1 + spread)),
+                               force_range_n=full, acc_range_m_s2=full / 2)
+        data, truth = simulate(guide, effects, cfg.ideal() if ideal else cfg, seed=seed + 1000 * level)
+        runs += list(data.runs)
+        truths[name] = truth
+    guide_name = data.guide
+    return RecordingData(runs=tuple(runs), guide=guide_name, description=f"force levels, seed {seed}"), truths
