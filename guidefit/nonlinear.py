@@ -505,3 +505,143 @@ def simulate_force_levels(guide="MRB35", effects=(), forces_n=(100.0, 1000.0, 50
         truths[name] = truth
     guide_name = data.guide
     return RecordingData(runs=tuple(runs), guide=guide_name, description=f"force levels, seed {seed}"), truths
+
+
+# --------------------------------------------------------------------------- fit
+
+
+#: First-guess grid of the preload factor (one simulated hit per level each).
+PRELOAD_GRID = (0.1, 0.25, 0.5, 1.0, 2.0, 4.0)
+PRELOAD_BOUNDS = (0.01, 10.0)
+KN_BOUNDS = (0.05, 5.0)
+
+
+@dataclass(frozen=True)
+class NonlinearFit:
+    """Preload factor (and roller-stiffness factor) fitted to force levels by the forward model.
+
+    ``predicted``: the apparent mode of every level at the fitted parameters;
+    ``sigma_hz``: the levels' uncertainties (:meth:`MeasuredLevel.sigma_hz`);
+    ``kn_std`` is None when ``K_n`` was not fitted. ``seconds``: process time
+    of the fit, ``evaluations``: forward-model runs.
+    """
+
+    preload_factor: float
+    preload_std: float
+    kn_factor: float
+    kn_std: float | None
+    levels: tuple
+    predicted: tuple
+    sigma_hz: tuple
+    chi2: float
+    dof: int
+    evaluations: int
+    seconds: float
+
+    @property
+    def within_uncertainty(self) -> bool:
+        """Every level's residual within 3 of its sigma."""
+        return all(abs(p.frequency_hz - lv.frequency_hz) <= 3 * s
+                   for lv, p, s in zip(self.levels, self.predicted, self.sigma_hz))
+
+    def rows(self) -> list[dict]:
+        """One row per level: run, label, force (N), measured, predicted, sigma (Hz), error (%)."""
+        return [{"run": lv.run, "label": lv.label, "peak_force_n": lv.peak_force_n,
+                 "measured_hz": lv.frequency_hz, "predicted_hz": p.frequency_hz, "sigma_hz": s,
+                 "measured_damping": lv.damping_ratio, "predicted_damping": p.damping_ratio,
+                 "error_pct": 100.0 * (p.frequency_hz / lv.frequency_hz - 1.0)}
+                for lv, p, s in zip(self.levels, self.predicted, self.sigma_hz)]
+
+    def to_dict(self) -> dict:
+        """JSON-ready summary."""
+        return {"preload_factor": self.preload_factor, "preload_std": self.preload_std,
+                "kn_factor": self.kn_factor, "kn_std": self.kn_std, "chi2": self.chi2, "dof": self.dof,
+                "within_uncertainty": self.within_uncertainty, "evaluations": self.evaluations,
+                "seconds": self.seconds, "levels": self.rows()}
+
+
+def _params(theta, fit_kn: bool, kn_fixed: float) -> tuple[float, float]:
+    """(p, k) from the fit coordinates (ln p, ln of the small-amplitude stiffness factor k p^(1/9))."""
+    p = math.exp(theta[0])
+    if not fit_kn:
+        return p, kn_fixed
+    return p, float(np.clip(math.exp(theta[1]) / p ** (1.0 / 9.0), *KN_BOUNDS))
+
+
+def _residuals(fm: ForwardModel, f_meas, sigma, theta, fit_kn: bool, kn_fixed: float, n_hits=None):
+    p, k = _params(theta, fit_kn, kn_fixed)
+    try:
+        pred = fm.predict(p, k, n_hits)
+    except (IdentificationError, ModelError):
+        return np.full(f_meas.size, 1e3)
+    return (np.array([x.frequency_hz for x in pred]) - f_meas) / sigma
+
+
+def _first_guess(fm: ForwardModel, f_meas, sigma, lowest: int) -> tuple[float, float]:
+    """(p, k) on :data:`PRELOAD_GRID`, k from the lowest level at small amplitude; one hit per level."""
+    label = fm.levels[lowest].label
+    best = (math.inf, 1.0, 1.0)
+    for p in PRELOAD_GRID:
+        try:
+            f_lin = fm.small_amplitude_hz(p, 1.0)[label]
+        except ModelError:
+            continue
+        k = float(np.clip((f_meas[lowest] / f_lin) ** 2, *KN_BOUNDS))
+        r = _residuals(fm, f_meas, sigma, np.log([p, k]), True, k, n_hits=1)
+        cost = float(r @ r)
+        if cost < best[0]:
+            best = (cost, p, k)
+    return best[1], best[2]
+
+
+def fit_levels(levels, guide="MRB35", fit_kn: bool = True, kn_factor: float = 1.0, n_hits: int = SIM_HITS,
+               effects=(), forward: ForwardModel | None = None) -> NonlinearFit:
+    """Fit the preload factor (and ``K_n`` from the lowest level) to measured force levels.
+
+    Parameters
+    ----------
+    levels : list of MeasuredLevel
+        At least two, forces differing by :data:`FORCE_RATIO` (:func:`measure_levels`).
+    guide : Guide or str
+    fit_kn : bool
+        Fit the roller-stiffness factor too (else fixed at ``kn_factor``).
+    n_hits, effects
+        As for :class:`ForwardModel`.
+
+    Raises :class:`~guidefit.errors.ModelError` for too few levels.
+    """
+    from scipy.optimize import least_squares
+
+    levels = list(levels)
+    if len(levels) < 2 + int(fit_kn) - 1 or len(levels) < 2:
+        raise ModelError(f"amplitude_dependence: {len(levels)} force level(s); the fit needs at least 2")
+    t0 = time.process_time()
+    fm = forward or ForwardModel(guide, levels, n_hits, effects=effects)
+    f_meas = np.array([lv.frequency_hz for lv in levels])
+    sigma = np.array([lv.sigma_hz() for lv in levels])
+    lowest = int(np.argmin([lv.peak_force_n for lv in levels]))
+    p0, k0 = _first_guess(fm, f_meas, sigma, lowest)
+    # coordinates: ln p and ln of the small-amplitude stiffness factor k p^(1/9) (Eq. 4: K_n ~ Delta^(1/9)),
+    # which the lowest level fixes nearly alone: the two are then almost uncorrelated
+    x0 = np.log([p0, k0 * p0 ** (1.0 / 9.0)]) if fit_kn else np.log([p0])
+    lo = np.log([PRELOAD_BOUNDS[0], KN_BOUNDS[0] * PRELOAD_BOUNDS[0] ** (1 / 9)][: x0.size])
+    hi = np.log([PRELOAD_BOUNDS[1], KN_BOUNDS[1] * PRELOAD_BOUNDS[1] ** (1 / 9)][: x0.size])
+    res = least_squares(lambda th: _residuals(fm, f_meas, sigma, th, fit_kn, kn_factor), np.clip(x0, lo, hi),
+                        bounds=(lo, hi), diff_step=3e-3, x_scale=1.0, xtol=1e-4, ftol=1e-6, max_nfev=30)
+    chi2 = float(res.fun @ res.fun)
+    dof = len(levels) - x0.size
+    try:
+        cov = np.linalg.inv(res.jac.T @ res.jac) * max(1.0, chi2 / dof if dof > 0 else 1.0)
+        std = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    except np.linalg.LinAlgError:
+        cov = np.full((x0.size, x0.size), math.inf)
+        std = np.full(x0.size, math.inf)
+    p, k = _params(res.x, fit_kn, kn_factor)
+    pred = fm.predict(p, k)
+    k_std = None
+    if fit_kn:  # ln k = theta_1 - theta_0 / 9
+        grad = np.array([-1.0 / 9.0, 1.0])
+        k_std = k * math.sqrt(max(float(grad @ cov @ grad), 0.0)) if np.all(np.isfinite(std)) else math.inf
+    return NonlinearFit(p, p * float(std[0]), k, k_std, tuple(levels),
+                        tuple(pred), tuple(float(s) for s in sigma), chi2, dof, fm.evaluations,
+                        time.process_time() - t0)
