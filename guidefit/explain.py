@@ -158,6 +158,13 @@ from pathlib import Path
 import numpy as np
 
 from guidefit.errors import ModelError, RecordingError
+from guidefit.model.effects import LevelData, Variant
+from guidefit.model.effects.amplitude_dependence import (  # noqa: F401 - public here since issue 5
+    AMPLITUDE_MODEL_FORM,
+    AMPLITUDE_SHIFT_CAP,
+    DEFAULT_DECAY_DAMPING,
+    effective_force,
+)
 
 #: Model-form floor of a mode's relative frequency uncertainty (0.05 %).
 FREQUENCY_FLOOR = 5.0e-4
@@ -165,13 +172,6 @@ FREQUENCY_FLOOR = 5.0e-4
 #: trend with force (against identify on RK4-simulated recordings: 0.02 % for drops up to 0.3 %, up to 0.15 %
 #: for drops near 1 %; see docs/explain.md).
 FORCE_LEVEL_FLOOR = 1.0e-3
-#: Model-form error of the amplitude model, as a share of the frequency shift it predicts (against identify
-#: on RK4-simulated recordings the predicted shift is off by up to a factor 2; see docs/explain.md).
-AMPLITUDE_MODEL_FORM = 0.5
-#: Largest predicted shift (2 % of the frequency) that the amplitude model's error allowance grows with:
-#: beyond it the describing function is outside what was checked, and a model predicting huge shifts
-#: must not buy itself a large uncertainty.
-AMPLITUDE_SHIFT_CAP = 0.02
 #: Relative frequency uncertainty of a mode that gives none (1 %, raw peak picking).
 DEFAULT_FREQUENCY_STD = 1.0e-2
 #: Relative per-channel noise of a mode shape that gives none and whose sensors do not over-determine
@@ -191,6 +191,8 @@ ACCEPT_P_VALUE = 0.01
 EQUAL_BIC = 2.0
 #: Largest standard deviation of a log-parameter (a factor 1.65) that still counts as identified.
 IDENTIFIABLE_LOG_STD = 0.5
+#: Variants of one effect (its best by single fit) tried as the partner of a seed in pairs of effects.
+PAIR_PARTNER_VARIANTS = 6
 #: Half-sine hammer pulse duration (s) when a force level gives none: 0.1 ms, a steel tip.
 DEFAULT_PULSE_S = 1.0e-4
 
@@ -372,6 +374,8 @@ class _Data:
     f_fit: np.ndarray  # (n,) identify's all-hits frequency (f differs where the levels replaced it)
     n_data: int
     n_shape_dof: int
+    levels: object = None  # guidefit.model.effects.LevelData: the same levels, for forward models
+    mode_run: list = field(default_factory=list)  # run per measured mode
 
 
 def _canonical(label):
@@ -528,6 +532,7 @@ def _prepare(measured, guide, sensors, force_levels, notes) -> _Data:
     # force levels
     lv_f, lv_s, lv_force, lv_label, lv_hit, lv_run, lv_w, lv_band = [], [], [], [], [], [], [], []
     lv_raw_s: list = []
+    lv_all: list = []
     for j, lv in enumerate(force_levels):
         if not isinstance(lv, ForceLevel):
             raise RecordingError(f"force level {j}: expected a ForceLevel, got {type(lv).__name__}")
@@ -565,6 +570,7 @@ def _prepare(measured, guide, sensors, force_levels, notes) -> _Data:
         # frequency is that of the F^2-weighted hits; with a drop ~ F^2 (the describing function below
         # lift-off) that is the frequency at F_eff = sqrt(sum F^4 / sum F^2), not at the mean force
         lv_force.append(effective_force(forces_j))
+        lv_all.append(tuple(float(x) for x in forces_j))
         lv_w.append(float(np.sum(forces_j**2)))
         lv_band.append(band)
         lv_label.append(lab)
@@ -589,7 +595,7 @@ def _prepare(measured, guide, sensors, force_levels, notes) -> _Data:
     lv_groups = [np.array([remap[j] for j in g]) for g in by_group.values() if len(g) >= 2]
     lv_f, lv_s, lv_force, lv_raw_s = ([x[j] for j in used] for x in (lv_f, lv_s, lv_force, lv_raw_s))
     lv_label, lv_hit, lv_run = ([x[j] for j in used] for x in (lv_label, lv_hit, lv_run))
-    lv_w, lv_band = ([x[j] for j in used] for x in (lv_w, lv_band))
+    lv_w, lv_band, lv_all = ([x[j] for j in used] for x in (lv_w, lv_band, lv_all))
     mode_zeta = np.array([m.damping_ratio if _finite_positive(m.damping_ratio) else np.nan for m in measured])
     mode_force = np.full(len(f), np.nan)
     mode_hit: list = [None] * len(f)
@@ -641,6 +647,9 @@ def _prepare(measured, guide, sensors, force_levels, notes) -> _Data:
     for ix, *_ in shapes:
         has_shape[ix] = True
     n_shape_dof = sum(mm.shape[0] * (mm.shape[1] - 1) for _, mm, _, _ in shapes)
+    levels = LevelData(frequency_hz=np.array(lv_f), sigma_hz=np.array(lv_s), force_n=np.array(lv_force),
+                       weight=np.array(lv_w), hit_forces_n=tuple(lv_all), label=tuple(lv_label),
+                       run=tuple(lv_run), hit=tuple(lv_hit), band=tuple(lv_band), groups=tuple(lv_groups))
     return _Data(
         f=np.array(f), sigma=np.array(sigma), labels=labels, label_arr=np.array(labels, dtype=object),
         group=np.array([_GROUP.get(lab, -1) if lab else -1 for lab in labels]),
@@ -649,6 +658,7 @@ def _prepare(measured, guide, sensors, force_levels, notes) -> _Data:
         mode_zeta=mode_zeta, lv_hit=lv_hit, lv_groups=lv_groups, lv_run=lv_run, mode_force=mode_force, mode_hit=mode_hit,
         mode_levels=mode_levels, lv_weight=np.array(lv_w), lv_band=lv_band, f_fit=f_fit,
         n_data=len(f) + n_shape_dof + len(lv_f) - len(lv_groups), n_shape_dof=n_shape_dof,
+        levels=levels, mode_run=list(runs_of),
     )
 
 
@@ -710,158 +720,28 @@ def _pair(data: _Data, sol) -> tuple[np.ndarray, dict]:
     return pairing, (proj, mac_full)
 
 
-_DF_CACHE: dict = {}
+def _forward(ctx, data: _Data, effects, spec, sol, pairing):
+    """The prediction of a model: the linear one, or that of its effect with a ``forward`` (the registry)."""
+    from guidefit.model.effects import EFFECTS, Forward, ForwardRequest, resolve_name
 
-
-def _df_table(guide):
-    """D(r) = k_eq(a) / K_n(Delta) with r = a / Delta: describing function of the roller law."""
-    from guidefit.model import static
-
-    key = (guide.name, guide.preload_m, guide.roller_stiffness_n_per_m)
-    if key in _DF_CACHE:
-        return _DF_CACHE[key]
-    delta = guide.preload_m
-    r = np.logspace(-3, 3, 301)
-    theta = (np.arange(2048) + 0.5) * 2 * math.pi / 2048
-    sin = np.sin(theta)
-    k0 = float(static.roller_stiffness(delta, guide, "nominal"))
-    d = np.array([2.0 * np.mean(static.roller_force(delta * (1 + x * sin), guide, "nominal") * sin)
-                  / (x * delta * k0) for x in r])
-    _DF_CACHE[key] = (np.log(r), d)
-    return _DF_CACHE[key]
-
-
-def _pulse_spectrum(w: float, t: float) -> float:
-    """|int_0^T sin(pi s / T) e^(-i w s) ds| of a unit half-sine pulse of duration T."""
-    a = math.pi / t
-    if abs(a - w) < 1e-9 * a:
-        return t / 2.0
-    return abs(a * (1 + np.exp(-1j * w * t)) / (a * a - w * w))
-
-
-_GL = np.polynomial.legendre.leggauss(16)
-_GL_S = (_GL[0] + 1) / 2
-_GL_W = _GL[1] / 2
-
-
-def _roller_modal(spec, sol) -> np.ndarray:
-    """(N, n_modes) roller deflection per unit modal coordinate, support body included."""
-    from dataclasses import replace
-
-    from guidefit.model import vibration as vib
-
-    g = vib.roller_gradients(spec.rollers)
-    if spec.support is not None:
-        rel = spec.rollers.position_m - np.asarray(spec.support.reference_m, float)
-        g_body = vib.roller_gradients(replace(spec.rollers, position_m=rel))
-        free = np.isfinite(np.asarray(spec.support.stiffness_to_ground, float))
-        g = np.hstack([g, -g_body[:, free]])
-    return g @ sol.shapes
-
-
-def effective_force(hit_forces_n) -> float:
-    """Force (N) at which a frequency falling as F^2 equals that of the H1 average of hits.
-
-    H1 = sum X F* / sum |F|^2 weights each hit's FRF by its force squared, so
-    the fitted frequency is about the F^2-weighted mean of the hits'
-    frequencies; with ``f(F) = f0 - c F^2`` (the describing function below
-    lift-off, ``1 - r^2/81``) that is ``f(F_eff)``,
-    ``F_eff = sqrt(sum F^4 / sum F^2)``: above the mean force when the
-    forces spread.
-
-    >>> round(effective_force([100.0, 200.0, 300.0]), 1)
-    264.6
-    >>> effective_force([250.0, 250.0])
-    250.0
-    """
-    forces = np.asarray(hit_forces_n, float)
-    return float(np.sqrt(np.sum(forces**4) / np.sum(forces**2)))
-
-
-def _amplitude_frequency(ctx, spec, sol, j: int, force: float, hit, preload_factor: float,
-                         roller_modal=None, zetas=None, band: float | None = None) -> float:
-    """Frequency (Hz) that a modal fit finds for model mode j after a hit of peak force F.
-
-    Every model mode m rings after the hit with modal amplitude
-    ``A_m(t) = A_m exp(-zeta_m w_m t)``; a roller's excursion is the RMS sum
-    ``a_i(t) = sqrt(sum_m (g_i . phi_m A_m(t))^2)`` (so a vertical hit also
-    softens pitch and roll), and mode j's frequency at time t is the
-    Rayleigh quotient with each roller's describing-function stiffness at
-    ``a_i(t)``. The resulting decay, sweeping from the hit's frequency up to
-    the small-amplitude one, is fitted as identify does
-    (:func:`_decay_fit_frequency`, in the relative half-width ``band`` of
-    the refit, default +/- max(3 zeta, 3 %)). ``roller_modal``:
-    :func:`_roller_modal` of (spec, sol) if already computed; ``zetas``:
-    damping ratio per model mode (nan or missing: :data:`DEFAULT_DECAY_DAMPING`).
-    """
-    from guidefit.model.vibration import rigid_body_map
-
-    log_r, table = _df_table(ctx.guide)
-    point, direction, pulse = hit
-    w_all = 2 * math.pi * sol.frequencies_hz
-    b = direction @ (rigid_body_map(point) @ sol.shapes[:5])
-    a0 = np.abs(b) * force * np.array([_pulse_spectrum(w, pulse) for w in w_all]) / w_all
-    z = np.full(w_all.size, DEFAULT_DECAY_DAMPING)
-    if zetas is not None:
-        zz = np.asarray(zetas, float)
-        ok = np.isfinite(zz) & (zz > 0) & (zz < 0.5)
-        z[ok] = zz[ok]
-    c = _roller_modal(spec, sol) if roller_modal is None else roller_modal
-    k = spec.rollers.stiffness_n_per_m
-    delta = preload_factor * ctx.guide.preload_m
-    w0, zj = w_all[j], z[j]
-    t_end = math.log(1e4) / (zj * w0)
-    t = t_end * _DECAY_TIMES
-    amp = a0[None, :] * np.exp(-(z * w_all)[None, :] * t[:, None])  # (times, modes)
-    r = np.sqrt(np.square(c) @ np.square(amp).T) / delta  # (rollers, times)
-    d = np.interp(np.log(np.maximum(r, 1e-3)), log_r, table)
-    w = np.sqrt(np.maximum(w0**2 + np.sum((k * c[:, j] ** 2)[:, None] * (d - 1.0), axis=0), (0.05 * w0) ** 2))
-    if np.max(np.abs(w - w0)) <= 1e-7 * w0:
-        return float(w0 / (2 * math.pi))
-    return _decay_fit_frequency(w0, w, zj, band)
-
-
-#: Damping ratio of a mode that gives none (simulate's default for most modes).
-DEFAULT_DECAY_DAMPING = 0.02
-_DECAY_TIMES = np.linspace(0.0, 1.0, 65) ** 2  # t / t_end at which w(t) is evaluated (dense early)
-
-
-def _decay_fit_frequency(w0: float, w_of_time: np.ndarray, zeta: float, band: float | None = None) -> float:
-    """Frequency (Hz) of a single-pole fit to the spectrum of a decay with a time-varying frequency.
-
-    The response ``a(t) sin(theta(t))``, ``a = exp(-zeta w0 t)``,
-    ``theta' = w(t) sqrt(1 - zeta^2)`` (``w_of_time`` at
-    :data:`_DECAY_TIMES` of ``t_end = ln(1e4) / (zeta w0)``), is transformed
-    and fitted near its peak (relative half-width ``band``, default
-    +/- max(3 zeta, 3 %) as identify's force-level refits) by
-    ``r/(s - p) + c`` (linearised, two reweighting
-    passes towards the output error). A fit of an FRF weights the slowly
-    sweeping small-amplitude tail most, so it sees a smaller drop than the
-    energy-weighted mean of ``w`` (about half at a 3 % drop).
-    """
-    f0 = w0 / (2 * math.pi)
-    fs = 16.0 * f0
-    t_end = math.log(1e4) / (zeta * w0)
-    n = int(min(max(t_end * fs, 256), 65536))
-    t = np.arange(n) / fs
-    level = np.exp(-zeta * w0 * t)
-    w = np.interp(t, t_end * _DECAY_TIMES, w_of_time) * math.sqrt(1.0 - zeta * zeta)  # |p| = w
-    theta = np.concatenate([[0.0], np.cumsum(0.5 * (w[1:] + w[:-1]) / fs)])
-    x = -(w**2) * level * np.sin(theta)
-    nfft = 1 << int(math.ceil(math.log2(8 * n)))
-    spec = np.fft.rfft(x, nfft)
-    freq = np.arange(spec.size) * fs / nfft
-    half = (max(3.0 * zeta, 0.03) if band is None else band) * f0
-    sel = (freq > f0 - half) & (freq < f0 + half)
-    h, s = spec[sel], 2j * math.pi * freq[sel]
-    a = np.column_stack([np.ones_like(h), h, s])
-    weight = np.ones(h.size)
-    pole = complex(-zeta * w0, w0)
-    for _ in range(3):
-        coef = np.linalg.lstsq(a * weight[:, None], h * s * weight, rcond=None)[0]
-        pole = complex(coef[1])
-        weight = 1.0 / np.maximum(np.abs(s - pole), 1e-12 * w0)
-    return float(abs(pole) / (2 * math.pi))
+    fm = sol.frequencies_hz
+    level_model = np.array([_level_mode(data, pairing, sol, lab) for lab in data.lv_label], dtype=int)
+    nonlinear = [e for e in effects if EFFECTS[resolve_name(e.name)].forward is not None]
+    if not nonlinear:
+        f_pred = np.where(pairing >= 0, fm[np.maximum(pairing, 0)], np.nan)
+        lv_pred = np.where(level_model >= 0, fm[np.maximum(level_model, 0)], np.nan)
+        return Forward(f_pred, lv_pred, np.zeros(data.f.size), np.zeros(data.lv_f.size))
+    if len(nonlinear) > 1:
+        raise ModelError("explain: at most one effect with its own forward model per candidate")
+    effect = nonlinear[0]
+    zetas = np.full(fm.size, np.nan)  # damping of the model modes from their measured partners
+    zetas[pairing[pairing >= 0]] = data.mode_zeta[pairing >= 0]
+    request = ForwardRequest(
+        guide=ctx.guide, spec=spec, solution=sol, parameters=dict(effect.parameters), effects=tuple(effects),
+        mode_model=pairing, mode_label=tuple(data.labels), mode_run=tuple(data.mode_run),
+        mode_levels=tuple(data.mode_levels), mode_measured_hz=data.f, model_damping=zetas,
+        level_model=level_model, levels=data.levels, cache=ctx.cache)
+    return EFFECTS[resolve_name(effect.name)].forward(request)
 
 
 def _evaluate(ctx, data: _Data, effects) -> _Eval:
@@ -877,27 +757,9 @@ def _evaluate(ctx, data: _Data, effects) -> _Eval:
         return _Eval(np.full(n_r, _BAD), np.full(n, -1), np.full(n, np.nan), np.full(n, np.nan),
                      np.full(data.lv_f.size, np.nan), None, ok=False)
     pairing, proj = _pair(data, sol)
-    amp = next((e.parameters["preload_factor"] for e in effects if e.name == "amplitude_dependence"), None)
-    fm = sol.frequencies_hz
-    f_pred = np.where(pairing >= 0, fm[np.maximum(pairing, 0)], np.nan)
-    c_all = _roller_modal(spec, sol) if amp is not None else None
-    if amp is not None:
-        zetas = np.full(fm.size, np.nan)  # damping of the model modes from their measured partners
-        zetas[pairing[pairing >= 0]] = data.mode_zeta[pairing >= 0]
-        for i in range(data.f.size):
-            if pairing[i] >= 0 and math.isfinite(data.mode_force[i]):
-                # H1 averages the hits' FRFs with weights F^2: so does the prediction, over the force bins
-                js = data.mode_levels[i]
-                own = all(data.lv_label[k] == data.labels[i] for k in js)  # the levels' refit bands
-                fk = [_amplitude_frequency(ctx, spec, sol, pairing[i], data.lv_force[k], data.lv_hit[k], amp,
-                                           c_all, zetas, data.lv_band[k] if own else None) for k in js]
-                w2 = data.lv_weight[js]
-                f_pred[i] = float(np.sum(w2 * fk) / np.sum(w2))
-    sigma = data.sigma
-    if amp is not None:  # the amplitude model's own error: a share of the shift it predicts
-        shift = np.where(pairing >= 0, fm[np.maximum(pairing, 0)] - f_pred, 0.0)
-        shift = np.minimum(np.abs(np.nan_to_num(shift)), AMPLITUDE_SHIFT_CAP * data.f)
-        sigma = np.hypot(sigma, AMPLITUDE_MODEL_FORM * shift)
+    pred = _forward(ctx, data, effects, spec, sol, pairing)
+    f_pred, lv_pred = pred.mode_hz, pred.level_hz
+    sigma = np.hypot(data.sigma, pred.mode_std_hz)  # the forward model's own error, in quadrature
     r_f = np.where(pairing >= 0, (f_pred - data.f) / sigma, UNPAIRED_PENALTY)
     r_f = np.nan_to_num(r_f, nan=UNPAIRED_PENALTY)
     blocks = [r_f]
@@ -910,20 +772,10 @@ def _evaluate(ctx, data: _Data, effects) -> _Eval:
         block[~ok] = 0.0
         blocks.append(block.ravel())
         mac[idx[ok]] = proj[1][idx[ok], j[ok]]
-    lv_pred = np.full(data.lv_f.size, np.nan)
-    for k, lab in enumerate(data.lv_label):
-        j = _level_mode(data, pairing, sol, lab)
-        if j is None:
-            continue
-        lv_pred[k] = fm[j] if amp is None else _amplitude_frequency(
-            ctx, spec, sol, j, data.lv_force[k], data.lv_hit[k], amp, c_all, zetas, data.lv_band[k])
     r_lv = np.full(data.lv_f.size, UNPAIRED_PENALTY)
+    lv_sigma = np.hypot(data.lv_sigma, pred.level_std_hz)
     for g in data.lv_groups:  # the trend within a group: its weighted mean removed (one dof per group)
-        d, s = lv_pred[g] - data.lv_f[g], data.lv_sigma[g]
-        if amp is not None and np.all(np.isfinite(d)):
-            j = _level_mode(data, pairing, sol, data.lv_label[g[0]])
-            shift = np.clip(fm[j] - lv_pred[g], 0.0, AMPLITUDE_SHIFT_CAP * data.lv_f[g])
-            s = np.hypot(s, AMPLITUDE_MODEL_FORM * (shift - shift.mean()))
+        d, s = lv_pred[g] - data.lv_f[g], lv_sigma[g]
         w = s ** -2.0
         if np.all(np.isfinite(d)):
             r_lv[g] = (d - np.sum(w * d) / np.sum(w)) / s
@@ -938,132 +790,50 @@ def _level_mode(data: _Data, pairing, sol, label: str):
             return int(pairing[i])
     if label in sol.labels:
         return sol.labels.index(label)
-    return None
+    return -1
 
 
 # --------------------------------------------------------------------------- candidates
 
 
-@dataclass(frozen=True)
-class _Free:
-    """A fitted parameter: transform, physical bounds, start grid (physical values)."""
-
-    name: str
-    unit: str
-    kind: str  # "log" or "lin"
-    lower: float
-    upper: float
-    grid: tuple
-
-    def encode(self, value: float) -> float:
-        return math.log(value) if self.kind == "log" else value / self.scale
-
-    def decode(self, theta: float) -> float:
-        return math.exp(theta) if self.kind == "log" else theta * self.scale
-
-    @property
-    def scale(self) -> float:
-        return 1.0 if self.kind == "log" else 0.01  # lin parameters are offsets in m
-
-    @property
-    def bounds(self) -> tuple[float, float]:
-        return self.encode(self.lower), self.encode(self.upper)
+def _level_trend(data: _Data) -> tuple[float, int, float]:
+    """(chi2, dof, p) of "the frequency does not change with hit force" over every level group."""
+    chi2, dof = 0.0, 0
+    for g in data.lv_groups:
+        w = data.lv_sigma[g] ** -2.0
+        z = (data.lv_f[g] - np.sum(w * data.lv_f[g]) / np.sum(w)) / data.lv_sigma[g]
+        chi2 += float(z @ z)
+        dof += len(g) - 1
+    return chi2, dof, (_p_value(chi2, dof) if dof > 0 else math.nan)
 
 
-@dataclass(frozen=True)
-class _Variant:
-    """One effect with its discrete options fixed and its continuous parameters free."""
+def _variants(guide, data: _Data, names, notes) -> list[Variant]:
+    """The candidate library: every registered effect's variants (its ``gate`` may refuse the data)."""
+    from guidefit.model.effects import EFFECTS, FitContext, resolve_name
 
-    effect: str
-    tag: str
-    fixed: dict
-    free: tuple
-    starts: tuple = ()  # explicit start points (tuples of physical values); default: grid product
-    reduces: tuple = ()  # (parameter, tag): at its upper bound (rigid) the variant becomes that one
-
-    @property
-    def title(self) -> str:
-        return f"{self.effect} ({self.tag})" if self.tag else self.effect
-
-
-def _log(name, unit, lower, upper, grid) -> _Free:
-    return _Free(name, unit, "log", lower, upper, tuple(grid))
-
-
-def _variants(guide, data: _Data, names, notes) -> list[_Variant]:
-    """The candidate library: every effect's discrete options, with fit bounds and start grids."""
-    from guidefit.model.effects import EFFECTS
-
-    out: list[_Variant] = []
-    extra_f = [float(data.f[i]) for i, lab in enumerate(data.labels) if lab is None]
+    chi2, dof, p = _level_trend(data)
+    ctx = FitContext(guide=guide, extra_frequencies_hz=tuple(float(data.f[i]) for i, lab in enumerate(data.labels)
+                                                             if lab is None),
+                     n_levels=int(data.lv_f.size), level_trend_chi2=chi2, level_trend_dof=dof, level_trend_p=p)
+    out: list[Variant] = []
     for name in names:
-        if name not in EFFECTS:
-            raise ModelError(f"explain: unknown candidate effect '{name}'; have {', '.join(EFFECTS)}")
-        if name == "added_mass":
-            mass = _log("mass_kg", "kg", 1e-4, 5.0, (0.003, 0.03, 0.3, 2.0))
-            points = "".join(guide.measuring_points_m)
-            tags = ([points] if len(points) > 1 else []) + list(points) + ["centre"]
-            out += [_Variant(name, f"at {t}", {"at": t}, (mass,)) for t in tags]
-        elif name == "support_compliance":
-            lat = _log("lateral_n_per_m", "N/m", 1e5, 1e13, (1e6, 1e7, 1e8, 1e9, 1e10, 1e11))
-            ver = _log("vertical_n_per_m", "N/m", 1e5, 1e13, (1e7, 1e8, 1e9, 1e10, 1e11))
-            rol = _log("roll_nm_per_rad", "N m/rad", 1e2, 1e11, (1e3, 1e4, 1e5, 1e6, 1e7, 1e8))
-            out += [_Variant(name, "lateral", {}, (lat,)), _Variant(name, "vertical", {}, (ver,)),
-                    _Variant(name, "roll", {}, (rol,)),
-                    _Variant(name, "lateral+vertical", {},
-                             (_log(lat.name, "N/m", 1e5, 1e13, (1e7, 1e8, 1e9, 1e11)),
-                              _log(ver.name, "N/m", 1e5, 1e13, (1e8, 1e9, 1e10, 1e12))),
-                             reduces=(("lateral_n_per_m", "vertical"), ("vertical_n_per_m", "lateral")))]
-        elif name == "contact_stiffness":
-            out.append(_Variant(name, "", {}, (_log("factor", "1", 0.05, 5.0, (0.3, 0.6, 0.9, 1.1, 1.5, 3.0)),)))
-        elif name == "amplitude_dependence":
-            if data.lv_f.size == 0:
-                notes.append("amplitude_dependence not tried: it needs the frequency per hit-force level")
-                continue
-            if not guide.preload_m > 0:
-                notes.append(f"amplitude_dependence not tried: guide {guide.name} has no preload")
-                continue
-            try:
-                from guidefit.model import static  # noqa: F401 - the contact law of the describing function
-            except ImportError:
-                notes.append("amplitude_dependence not tried: the static contact model is not available")
-                continue
-            out.append(_Variant(name, "", {}, (_log("preload_factor", "1", 0.01, 10.0,
-                                                    (0.03, 0.1, 0.2, 0.35, 0.5, 0.7, 1.0, 2.0, 5.0)),)))
-        elif name == "base_mode":
-            m = _log("mass_kg", "kg", 1e-3, 1e4, ())
-            kl = _log("lateral_n_per_m", "N/m", 1e4, 1e13, ())
-            kv = _log("vertical_n_per_m", "N/m", 1e4, 1e13, ())
-            f_try = sorted(set(extra_f + [1500.0, 3000.0, 6000.0]))
-            masses = (0.1, 0.5, 2.0, 10.0, 50.0)
-
-            def k_of(mass, f_hz):
-                return min(max(mass * (2 * math.pi * f_hz) ** 2, 1.1e4), 0.9e13)
-
-            two = tuple((mm, k_of(mm, ff)) for mm in masses for ff in f_try)
-            three = tuple((mm, k_of(mm, fa), k_of(mm, fb)) for mm in (0.3, 2.0, 10.0)
-                          for fa in f_try[-3:] + [9000.0] for fb in f_try[-3:] + [9000.0])
-            out += [_Variant(name, "vertical", {}, (m, kv), two), _Variant(name, "lateral", {}, (m, kl), two),
-                    _Variant(name, "lateral+vertical", {}, (m, kl, kv), three,
-                             reduces=(("lateral_n_per_m", "vertical"), ("vertical_n_per_m", "lateral")))]
-        elif name == "row_damage":
-            fac = _log("factor", "1", 1e-3, 1.0, (0.01, 0.1, 0.4, 0.8))
-            out += [_Variant(name, f"row {r}", {"row": r}, (fac,)) for r in (1, 2, 3, 4)]
-        elif name == "com_offset":
-            # inside the carriage: |x| <= row offset, -h3 <= y <= 5 mm, |z| <= roller span / 4
-            e, h3, zl = guide.row_offset_m, guide.h3_m, max(guide.roller_span_m / 4, 1e-3)
-            fy = _Free("y_m", "m", "lin", -h3, 0.005, tuple(np.linspace(-h3, 0.0, 5)[1:-1]) + (-0.002,))
-            fx = _Free("x_m", "m", "lin", -e, e, (-e / 2, 0.0, e / 2))
-            fz = _Free("z_m", "m", "lin", -zl, zl, (-zl / 2, 0.0, zl / 2))
-            out += [_Variant(name, "y", {}, (fy,)), _Variant(name, "xyz", {}, (fx, fy, fz))]
-        else:
-            notes.append(f"effect {name}: no fitting rule; not tried")
+        try:
+            effect = EFFECTS[resolve_name(name)]
+        except ModelError:
+            raise ModelError(f"explain: unknown candidate effect '{name}'; have {', '.join(EFFECTS)}") from None
+        reason = effect.gate(ctx) if effect.gate is not None else None
+        if reason:
+            notes.append(f"{effect.name} not tried: {reason}")
+            continue
+        out += effect.variants(ctx)
     return out
 
 
-def _compatible(a: _Variant, b: _Variant) -> bool:
-    support = {"support_compliance", "base_mode"}
-    return a.effect != b.effect and not (a.effect in support and b.effect in support)
+def _compatible(a: Variant, b: Variant) -> bool:
+    """Whether two variants may be fitted together: the registry's rule (:func:`~guidefit.model.effects.combinable`)."""
+    from guidefit.model.effects import combinable
+
+    return combinable(a.effect, b.effect)
 
 
 @dataclass
@@ -1154,7 +924,7 @@ def _fit(ctx, data: _Data, variants: tuple, starts: list, n_polish: int = 2, max
             std.append(fr.scale * st if math.isfinite(st) else math.inf)
             ident.append(bool(math.isfinite(st) and fr.scale * st < 0.25 * (fr.upper - fr.lower)))
         b0, b1 = fr.bounds
-        at_bound.append(bool(min(t - b0, b1 - t) < 1e-3 * (b1 - b0)))
+        at_bound.append(bool(not fr.bound_is_value and min(t - b0, b1 - t) < 1e-3 * (b1 - b0)))
     return _Fit(tuple(variants), res.x, values, std, chi2, ev, k, ident, at_bound)
 
 
@@ -1200,9 +970,14 @@ def _fit_pairs(ctx, data: _Data, fits: list, variants: list, bic, progress) -> l
     # each seed effect with its variants that are as good as its best one (at most two)
     seeds = [f for fs in top for f in fs[:2] if bic(f) - bic(fs[0]) < EQUAL_BIC]
     single_of = {f.variants[0].title: f for f in fits}
+    # each partner effect with its best PAIR_PARTNER_VARIANTS variants (by their single fits)
+    ranked: dict = {}
+    for f in sorted(fits, key=lambda f: round(bic(f), 3)):
+        ranked.setdefault(f.variants[0].effect, []).append(f.variants[0].title)
+    partners = [v for v in variants if v.title in ranked.get(v.effect, [])[:PAIR_PARTNER_VARIANTS]]
     jobs, seen = [], set()
     for seed in seeds:
-        for v in variants:
+        for v in partners:
             key = frozenset((seed.variants[0].title, v.title))
             too_many = len(seed.variants[0].free) + len(v.free) > data.n_data
             if _compatible(seed.variants[0], v) and key not in seen and not too_many:
@@ -1228,7 +1003,7 @@ def _fit_pairs(ctx, data: _Data, fits: list, variants: list, bic, progress) -> l
     return out
 
 
-def _grid_starts(variant: _Variant) -> list:
+def _grid_starts(variant: Variant) -> list:
     if variant.starts:
         return [tuple(s) for s in variant.starts]
     import itertools
@@ -1310,7 +1085,31 @@ def _n_responsive(data: _Data, nominal: _Eval, ev: _Eval) -> int:
     return count + int(np.sum(d[pos:] > 3.0))
 
 
-def _candidate_entry(fit: _Fit, data: _Data, bic_min: float, nominal: _Eval) -> dict:
+def _choice_penalty(fit: _Fit, choices: dict) -> float:
+    """2 ln N per effect that chose among N discrete variants (a uniform prior over them)."""
+    return float(sum(2.0 * math.log(max(1, choices.get(v.effect, 1))) for v in fit.variants))
+
+
+def _bic(fit: _Fit, data: _Data, choices: dict) -> float:
+    """BIC = chi2 + k ln n + 2 ln N_choices: the discrete choices counted (docs/explain.md)."""
+    return fit.chi2 + fit.k * math.log(data.n_data) + _choice_penalty(fit, choices)
+
+
+def _effect_refusals(fit: _Fit, data: _Data) -> list:
+    """Reasons of the effects' own ``accept`` rules (e.g. no predicted trend over force levels)."""
+    from guidefit.model.effects import EFFECTS, resolve_name
+
+    out = []
+    for v in fit.variants:
+        rule = EFFECTS[resolve_name(v.effect)].accept
+        if rule is not None and fit.ev.ok:
+            reason = rule(data.levels, fit.ev.lv_pred)
+            if reason:
+                out.append(f"{v.effect}: {reason}")
+    return out
+
+
+def _candidate_entry(fit: _Fit, data: _Data, bic_min: float, nominal: _Eval, choices: dict) -> dict:
     dof = data.n_data - fit.k
     p = _p_value(fit.chi2, dof)
     problems = []
@@ -1333,17 +1132,20 @@ def _candidate_entry(fit: _Fit, data: _Data, bic_min: float, nominal: _Eval) -> 
     if dof > 0 and not within:
         problems.append(f"misfit beyond uncertainty (chi2 {fit.chi2:.1f} for {dof} dof)")
     combination_ok = len(fit.variants) == 1 or n_resp > fit.k
-    accepted = within and not bad and combination_ok
+    refused = _effect_refusals(fit, data)
+    problems += refused
+    accepted = within and not bad and combination_ok and not refused
     if accepted and n_resp <= fit.k:
         problems.append(f"within uncertainty; it moves {n_resp} data with {fit.k} parameter(s), the data it "
                         "leaves unchanged are its test")
-    bic = fit.chi2 + fit.k * math.log(data.n_data)
+    bic = _bic(fit, data, choices)
     return {
         "name": "+".join(v.effect for v in fit.variants),
         "variant": " + ".join(v.title for v in fit.variants),
         "effects": _param_dict(fit),
         "parameters": {f"{e['name']}.{k}": v for e in _param_dict(fit) for k, v in e["parameters"].items()},
-        "n_params": fit.k, "n_responsive": n_resp, "chi2": fit.chi2, "dof": dof, "p_value": p, "bic": bic,
+        "n_params": fit.k, "n_choices": int(round(math.exp(_choice_penalty(fit, choices) / 2))),
+        "n_responsive": n_resp, "chi2": fit.chi2, "dof": dof, "p_value": p, "bic": bic,
         "delta_bic": bic - bic_min,
         "rms_frequency_error_pct": _rms_pct(data, fit.ev)[0],
         "accepted": bool(accepted),
@@ -1403,6 +1205,7 @@ class _Ctx:
         self.guide = guide
         self.spec = spec
         self.n_eval = 0
+        self.cache: dict = {}  # forward models' scratch space for one explain call
 
 
 def explain_modes(measured, guide, sensors=(), force_levels=(), candidates=None, progress=None,
@@ -1473,6 +1276,9 @@ def explain_modes(measured, guide, sensors=(), force_levels=(), candidates=None,
     ctx = _Ctx(guide, vib.model_from_guide(guide))
     names = list(EFFECTS) if candidates is None else list(candidates)
     variants = _variants(guide, data, names, notes)
+    choices: dict = {}
+    for v in variants:
+        choices[v.effect] = choices.get(v.effect, 0) + 1
 
     nominal = _evaluate(ctx, data, [])
     chi2_0 = float(nominal.r @ nominal.r)
@@ -1490,13 +1296,11 @@ def explain_modes(measured, guide, sensors=(), force_levels=(), candidates=None,
         fits.append(_fit(ctx, data, (v,), _grid_starts(v)))
         if progress is not None:
             progress(done, total, v.title)
-    ln_n = math.log(data.n_data)
-
     def bic(fit):
-        return fit.chi2 + fit.k * ln_n
+        return _bic(fit, data, choices)
 
     def entry(fit):
-        return _candidate_entry(fit, data, 0.0, nominal)
+        return _candidate_entry(fit, data, 0.0, nominal, choices)
 
     singles_ok = [f for f in fits if entry(f)["accepted"]]
     pairs_tried = False
@@ -1505,7 +1309,7 @@ def explain_modes(measured, guide, sensors=(), force_levels=(), candidates=None,
         fits += _fit_pairs(ctx, data, fits, variants, bic, progress)
 
     bic_min = min([bic(nominal_fit)] + [bic(f) for f in fits])
-    entries = [(f, _candidate_entry(f, data, bic_min, nominal)) for f in fits]
+    entries = [(f, _candidate_entry(f, data, bic_min, nominal, choices)) for f in fits]
     nominal_entry = {"name": "nominal", "variant": "nominal", "effects": [], "n_params": 0, "chi2": chi2_0,
                      "dof": data.n_data, "p_value": p0, "bic": chi2_0, "delta_bic": chi2_0 - bic_min,
                      "rms_frequency_error_pct": _rms_pct(data, nominal)[0],
@@ -1752,6 +1556,7 @@ def synthetic_modes(guide, effects=(), sensors=None, frequency_std: float = 1e-3
     """
     from guidefit.model import vibration as vib
     from guidefit.model.effects import Effect, apply_effects, make_effect, parse_effect
+    from guidefit.model.effects.amplitude_dependence import amplitude_frequency, roller_modal
     from guidefit.model.guides import Guide, load_guide
 
     guide = guide if isinstance(guide, Guide) else load_guide(guide)
@@ -1763,16 +1568,15 @@ def synthetic_modes(guide, effects=(), sensors=None, frequency_std: float = 1e-3
     sol = vib.solve_modes(spec) if solution is None else solution
     amp = next((e.parameters["preload_factor"] for e in effects if e.name == "amplitude_dependence"), None)
     forces = [float(f) for f in forces]
-    ctx = _Ctx(guide, spec)
-    c_all = _roller_modal(spec, sol) if amp is not None and solution is None else None
+    c_all = roller_modal(spec, sol) if amp is not None and solution is None else None
     levels = []
 
     def freq_at(j, label, force):
         if amp is None or c_all is None:
             return float(sol.frequencies_hz[j])
         point, direction = DEFAULT_HITS[label]
-        return _amplitude_frequency(ctx, spec, sol, j, force, (point, np.asarray(direction, float),
-                                                               DEFAULT_PULSE_S), amp, c_all)
+        return amplitude_frequency(guide, spec, sol, j, force, (point, np.asarray(direction, float),
+                                                                DEFAULT_PULSE_S), amp, c_all)
 
     labels = list(sol.labels)
     for lab in ("vertical", "roll_low") if forces else ():

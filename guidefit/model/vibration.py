@@ -245,6 +245,39 @@ def scale_roller_stiffness(spec: ModelSpec, factor) -> ModelSpec:
     return with_roller_stiffness(spec, spec.rollers.stiffness_n_per_m * f)
 
 
+def roller_index_in_row(rollers: RollerSet) -> np.ndarray:
+    """(N,) 1-based position of each roller in its row, counted along +z (roller 1 at the -z end)."""
+    index = np.zeros(rollers.row.size, dtype=int)
+    for row in np.unique(rollers.row):
+        sel = np.flatnonzero(rollers.row == row)
+        index[sel[np.argsort(rollers.position_m[sel, 2], kind="stable")]] = np.arange(1, sel.size + 1)
+    return index
+
+
+def segment_weights(rollers: RollerSet, row: int, first: float, last: float) -> np.ndarray:
+    """(N,) share of each roller inside the segment ``first``-``last`` of row ``row`` (0 to 1).
+
+    Roller i (1-based along +z) spans ``[i - 1/2, i + 1/2]`` and the segment
+    ``[first - 1/2, last + 1/2]``: whole numbers select rollers first..last
+    exactly; fractional ends take part of a roller, so a fit can move an end
+    smoothly.
+
+    >>> from guidefit.model.guides import load_guide
+    >>> w = segment_weights(rollers_from_guide(load_guide("MRB35")), 2, 1, 10)
+    >>> float(w.sum()), float(w[21:31].min())
+    (10.0, 1.0)
+    """
+    index = roller_index_in_row(rollers)
+    overlap = np.minimum(index + 0.5, last + 0.5) - np.maximum(index - 0.5, first - 0.5)
+    return np.where(rollers.row == row, np.clip(overlap, 0.0, 1.0), 0.0)
+
+
+def scale_roller_segment(spec: ModelSpec, row: int, first: float, last: float, factor: float) -> ModelSpec:
+    """Rollers ``first``-``last`` of row ``row`` (see :func:`segment_weights`) times ``factor``."""
+    w = segment_weights(spec.rollers, row, first, last)
+    return scale_roller_stiffness(spec, 1.0 - (1.0 - float(factor)) * w)
+
+
 def with_support(spec: ModelSpec, support: SupportBody) -> ModelSpec:
     """Put a support body (rail, base) between the rollers and the ground."""
     k = np.asarray(support.stiffness_to_ground, dtype=float)
