@@ -157,7 +157,7 @@ from pathlib import Path
 
 import numpy as np
 
-from guidefit.errors import ModelError, RecordingError
+from guidefit.errors import GuidefitError, IdentificationError, ModelError, RecordingError
 from guidefit.model.effects import LevelData, Variant
 from guidefit.model.effects.amplitude_dependence import (  # noqa: F401 - public here since issue 5
     AMPLITUDE_MODEL_FORM,
@@ -1817,6 +1817,12 @@ def explain_identification(identification, candidates=None, progress=None) -> Ex
             levels.append(_level_from(entry, f"{where}: force_levels entry {k}"))
         except RecordingError as exc:
             notes.append(f"force level skipped: {exc}")
+    try:  # runs that differ only in hit force: levels of one test, compared by the nonlinear forward model
+        from guidefit import nonlinear
+
+        modes, levels = nonlinear.prepare_for_explain(identification, modes, levels, notes)
+    except (GuidefitError, IdentificationError, OSError) as exc:
+        notes.append(f"force levels across runs not measured: {exc}")
     return explain_modes(modes, identification.guide, sensors, levels, candidates=candidates,
                          progress=progress, source=where, notes=notes)
 

@@ -131,6 +131,9 @@ class MeasuredLevel:
     damping_ratio: float
     band_hz: tuple
     setup: LevelSetup = field(repr=False)
+    reference_hz: float = math.nan  # the mode's small-amplitude frequency on the lowest level (peak search)
+    reference_damping: float = 0.03  # its damping ratio there (band width)
+    weights: tuple = ()  # per channel, of the peak search (the mode's shape squared)
 
     @property
     def peak_force_n(self) -> float:
@@ -207,7 +210,12 @@ def level_band(frequency_hz, H, mode_hz: float, damping_ratio: float, weights=No
     if not np.any(sel):
         raise IdentificationError(f"no FRF bins near {mode_hz:.0f} Hz")
     power = (np.abs(H[sel]) ** 2) @ w
-    peak = float(f[sel][int(np.argmax(power))])
+    i = int(np.argmax(power))
+    peak = float(f[sel][i])
+    if 0 < i < power.size - 1 and np.all(power[i - 1:i + 2] > 0):  # parabola through log power: continuous
+        a, b, c = np.log(power[i - 1:i + 2])
+        if a - 2 * b + c < 0:
+            peak += 0.5 * (a - c) / (a - 2 * b + c) * float(f[1] - f[0])
     half = max(BAND_ZETAS * damping_ratio, BAND_MIN) * peak
     return peak - half, peak + half
 
@@ -260,7 +268,8 @@ def simulate_level(model, level: MeasuredLevel, n_hits: int = SIM_HITS):
 
 def predict_level(model, level: MeasuredLevel, n_hits: int = SIM_HITS) -> ModeFit:
     """The apparent mode of a level predicted by ``model``: its simulated hits through the measurement's
-    windows, estimator and one-pole fit in the level's band."""
+    windows, estimator and one-pole fit, the band found by the same rule (:func:`level_band`, the peak
+    searched from the model's small-amplitude frequency, the measured reference damping and weights)."""
     from guidefit.frf import WindowSettings, frf_from_records
 
     s = level.setup
@@ -268,7 +277,14 @@ def predict_level(model, level: MeasuredLevel, n_hits: int = SIM_HITS) -> ModeFi
     window = WindowSettings(force_window_s=s.force_window_s or math.inf, exp_tau_s=s.exp_tau_s or math.inf)
     frf = frf_from_records(records, fs, 0, ("force", *s.channel_names), s.estimator, window,
                            pretrigger_samples=pre, run=level.run, workers=1)
-    return apparent_mode(frf.frequency_hz, frf.H, level.band_hz, s.exp_tau_s)
+    band = level.band_hz
+    if math.isfinite(level.reference_hz):
+        sol = model.solution
+        f_small = float(sol.frequencies_hz[sol.labels.index(level.label)]) if level.label in sol.labels \
+            else level.reference_hz
+        band = level_band(frf.frequency_hz, frf.H, f_small, level.reference_damping,
+                          level.weights if level.weights else None)
+    return apparent_mode(frf.frequency_hz, frf.H, band, s.exp_tau_s)
 
 
 class ForwardModel:
@@ -466,7 +482,8 @@ def _measure_mode(bins, mode, notes: list) -> list:
             force_window_s=frf.force_window_s, exp_tau_s=frf.exp_window_tau_s, estimator=frf.estimator)
         out.append(MeasuredLevel(run.name, mode.label, tuple(float(x) for x in np.sort(forces)),
                                  fit.frequency_hz, fit.frequency_std_hz, fit.damping_ratio,
-                                 tuple(float(x) for x in band), setup))
+                                 tuple(float(x) for x in band), setup, float(mode.frequency_hz),
+                                 float(mode.damping_ratio), tuple(float(x) for x in weights)))
     return out
 
 
@@ -645,3 +662,116 @@ def fit_levels(levels, guide="MRB35", fit_kn: bool = True, kn_factor: float = 1.
     return NonlinearFit(p, p * float(std[0]), k, k_std, tuple(levels),
                         tuple(pred), tuple(float(s) for s in sigma), chi2, dof, fm.evaluations,
                         time.process_time() - t0)
+
+
+# --------------------------------------------------------------------------- explain
+
+
+#: Preload factors at which explain's forward model is simulated; between them the apparent frequency
+#: ratio (level / small-amplitude) is interpolated in ln p by a cubic spline.
+EXPLAIN_GRID = tuple(float(x) for x in np.geomspace(0.05, 10.0, 13))
+_SETUPS: dict = {}  # (run, label, round(frequency_hz, 6)) -> MeasuredLevel, from prepare_for_explain
+
+
+def _key(run, label, frequency_hz) -> tuple:
+    return (run, label, round(float(frequency_hz), 6))
+
+
+def prepare_for_explain(identification, modes, levels, notes: list):
+    """Force levels across runs that differ only in hit force, for explain; modes of their harder runs out.
+
+    Each group of runs found by :func:`measure_levels` with two or more
+    runs gives :class:`guidefit.explain.ForceLevel` entries (named after its
+    lowest run, so they form one trend with the mode identified there), and
+    the measured setups are registered for :func:`forward` (the simulated
+    forward model). Every mode, labelled or extra, of the group's harder runs
+    is left out: a peak distorted or split by contact loss is that level's
+    nonlinear mode, which enters through the level, never an extra mode.
+    Returns ``(modes, levels)``.
+    """
+    from guidefit.explain import ForceLevel
+
+    found = measure_levels(identification, notes=notes)
+    by_group: dict = {}
+    for lv in found:
+        by_group.setdefault((lv.setup.hit_position_m, lv.setup.hit_direction, lv.label), []).append(lv)
+    harder, out = set(), list(levels)
+    for group in by_group.values():
+        runs = sorted({lv.run for lv in group}, key=lambda r: min(x.peak_force_n for x in group if x.run == r))
+        if len(runs) < 2:
+            continue  # one run with a force spread: identify's own force levels cover it
+        harder.update(runs[1:])
+        out = [x for x in out if x.run not in runs]
+        for lv in group:
+            _SETUPS[_key(runs[0], lv.label, lv.frequency_hz)] = lv
+            out.append(ForceLevel(lv.peak_force_n, lv.label, lv.frequency_hz, lv.frequency_std_hz,
+                                  hit_position_m=lv.setup.hit_position_m, hit_direction=lv.setup.hit_direction,
+                                  pulse_s=lv.setup.pulse_s, run=runs[0], hit_forces_n=lv.hit_forces_n,
+                                  band_hz=lv.band_hz))
+    if harder:
+        dropped = [m for m in modes if m.run in harder]
+        modes = [m for m in modes if m.run not in harder]
+        notes.append(f"runs {', '.join(sorted(harder))}: force levels of one test (the same hits, harder); "
+                     f"their {len(dropped)} mode(s) enter through the levels, not as modes or extra peaks")
+    return modes, out
+
+
+def registered_levels(levels_data) -> list | None:
+    """The registered :class:`MeasuredLevel` of every level explain compares, or None if any is missing."""
+    out = []
+    for run, label, f in zip(levels_data.run, levels_data.label, levels_data.frequency_hz):
+        lv = _SETUPS.get(_key(run, label, f))
+        if lv is None:
+            return None
+        out.append(lv)
+    return out
+
+
+def _ratios(fm: ForwardModel, levels, p: float, n_hits: int) -> list:
+    small = fm.small_amplitude_hz(p)
+    try:
+        return [x.frequency_hz / small[lv.label] for lv, x in zip(levels, fm.predict(p, 1.0, n_hits))]
+    except IdentificationError:
+        return [math.nan] * len(levels)
+
+
+def ratio_table(guide, levels, cache: dict, n_hits: int = SIM_HITS):
+    """Apparent / small-amplitude frequency of each level against ln p (cached per explain call).
+
+    A coarse grid (:data:`EXPLAIN_GRID`, one simulated hit per level) finds
+    the preload factor p* whose ratios fit the measured levels best (the
+    lowest level anchoring the small-amplitude frequency); seven points within
+    +/- 30 % of p* are then simulated with ``n_hits`` hits. Returns
+    ``(coarse ln p, coarse ratios, dense ln p, dense ratios)``; explain scales
+    its candidate's small-amplitude frequency by the interpolated ratio.
+    """
+    key = ("nonlinear-ratio", id(guide), tuple(_key(lv.run, lv.label, lv.frequency_hz) for lv in levels))
+    if key not in cache:
+        fm = ForwardModel(guide, levels, n_hits)
+        coarse = np.array([_ratios(fm, levels, p, 1) for p in EXPLAIN_GRID])
+        f = np.array([lv.frequency_hz for lv in levels])
+        sigma = np.array([lv.sigma_hz() for lv in levels])
+        low = int(np.argmin([lv.peak_force_n for lv in levels]))
+        cost = [np.nansum(((f[low] / r[low] * r - f) / sigma) ** 2) if np.isfinite(r[low]) else math.inf
+                for r in coarse]
+        best = EXPLAIN_GRID[int(np.argmin(cost))]
+        dense_p = best * np.exp(np.linspace(-0.3, 0.3, 7))
+        dense = np.array([_ratios(fm, levels, p, n_hits) for p in dense_p])
+        cache[key] = (np.log(EXPLAIN_GRID), coarse, np.log(dense_p), dense)
+    return cache[key]
+
+
+def level_predictions(guide, levels, small_hz, preload_factor: float, cache: dict) -> np.ndarray:
+    """Predicted apparent frequency (Hz) of each level: ``small_hz`` times the interpolated ratio."""
+    from scipy.interpolate import CubicSpline
+
+    xc, rc, xd, rd = ratio_table(guide, levels, cache)
+    lp = math.log(preload_factor)
+    x, ratios = (xd, rd) if xd[0] <= lp <= xd[-1] else (xc, rc)
+    lp = float(np.clip(lp, x[0], x[-1]))
+    out = np.full(len(levels), np.nan)
+    for k in range(len(levels)):
+        ok = np.isfinite(ratios[:, k])
+        if ok.sum() >= 4:
+            out[k] = small_hz[k] * float(CubicSpline(x[ok], ratios[ok, k])(lp))
+    return out
