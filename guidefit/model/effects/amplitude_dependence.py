@@ -208,7 +208,8 @@ def simulated_forward(req, measured) -> Forward:
     paired = pairing >= 0
     f_pred = np.where(paired, fm[np.maximum(pairing, 0)], np.nan)
     for i in np.flatnonzero(paired):
-        js = req.mode_levels[i]
+        # the levels measure their own mode only; another mode of the lowest run is at small amplitude
+        js = [k for k in (req.mode_levels[i] or ()) if lv.label[k] == req.mode_label[i]]
         if js and np.all(np.isfinite(level_hz[js])):
             w2 = lv.weight[js]
             f_pred[i] = float(np.sum(w2 * level_hz[js]) / np.sum(w2))
