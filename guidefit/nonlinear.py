@@ -645,7 +645,7 @@ def fit_levels(levels, guide="MRB35", fit_kn: bool = True, kn_factor: float = 1.
     lo = np.log([PRELOAD_BOUNDS[0], KN_BOUNDS[0] * PRELOAD_BOUNDS[0] ** (1 / 9)][: x0.size])
     hi = np.log([PRELOAD_BOUNDS[1], KN_BOUNDS[1] * PRELOAD_BOUNDS[1] ** (1 / 9)][: x0.size])
     res = least_squares(lambda th: _residuals(fm, f_meas, sigma, th, fit_kn, kn_factor), np.clip(x0, lo, hi),
-                        bounds=(lo, hi), diff_step=3e-3, x_scale=1.0, xtol=1e-4, ftol=1e-6, max_nfev=30)
+                        bounds=(lo, hi), diff_step=3e-3, x_scale=1.0, xtol=1e-3, ftol=1e-6, max_nfev=30)
     chi2 = float(res.fun @ res.fun)
     dof = len(levels) - x0.size
     try:
@@ -670,7 +670,10 @@ def fit_levels(levels, guide="MRB35", fit_kn: bool = True, kn_factor: float = 1.
 
 #: Preload factors at which explain's forward model is simulated; between them the apparent frequency
 #: ratio (level / small-amplitude) is interpolated in ln p by a cubic spline.
-EXPLAIN_GRID = tuple(float(x) for x in np.geomspace(0.05, 10.0, 13))
+EXPLAIN_GRID = tuple(float(x) for x in np.geomspace(0.05, 10.0, 11))
+#: Around the coarse grid's best preload factor, DENSE_POINTS factors within exp(+/- DENSE_HALF_WIDTH) are
+#: simulated with every hit (explain's fit interpolates between them).
+DENSE_POINTS, DENSE_HALF_WIDTH = 5, 0.2
 _SETUPS: dict = {}  # (run, label, round(frequency_hz, 6)) -> MeasuredLevel, from prepare_for_explain
 
 
@@ -736,13 +739,25 @@ def _ratios(fm: ForwardModel, levels, p: float, n_hits: int) -> list:
         return [math.nan] * len(levels)
 
 
+def _coarse_minimum(x, cost) -> float:
+    """Preload factor at the minimum of a cubic spline through the coarse grid's costs."""
+    from scipy.interpolate import CubicSpline
+
+    ok = np.isfinite(cost)
+    if ok.sum() < 4:
+        return float(math.exp(x[int(np.nanargmin(np.where(ok, cost, np.nan)))]))
+    fine = np.linspace(x[ok][0], x[ok][-1], 400)
+    return float(math.exp(fine[int(np.argmin(CubicSpline(x[ok], np.log1p(cost[ok]))(fine)))]))
+
+
 def ratio_table(guide, levels, cache: dict, n_hits: int = SIM_HITS):
     """Apparent / small-amplitude frequency of each level against ln p (cached per explain call).
 
     A coarse grid (:data:`EXPLAIN_GRID`, one simulated hit per level) finds
     the preload factor p* whose ratios fit the measured levels best (the
-    lowest level anchoring the small-amplitude frequency); seven points within
-    +/- 30 % of p* are then simulated with ``n_hits`` hits. Returns
+    lowest level anchoring the small-amplitude frequency; minimum of a spline
+    through the grid's costs); :data:`DENSE_POINTS` factors within
+    ``p* exp(+/- DENSE_HALF_WIDTH)`` are then simulated with ``n_hits`` hits. Returns
     ``(coarse ln p, coarse ratios, dense ln p, dense ratios)``; explain scales
     its candidate's small-amplitude frequency by the interpolated ratio.
     """
@@ -755,8 +770,8 @@ def ratio_table(guide, levels, cache: dict, n_hits: int = SIM_HITS):
         low = int(np.argmin([lv.peak_force_n for lv in levels]))
         cost = [np.nansum(((f[low] / r[low] * r - f) / sigma) ** 2) if np.isfinite(r[low]) else math.inf
                 for r in coarse]
-        best = EXPLAIN_GRID[int(np.argmin(cost))]
-        dense_p = best * np.exp(np.linspace(-0.3, 0.3, 7))
+        best = _coarse_minimum(np.log(EXPLAIN_GRID), np.asarray(cost, float))
+        dense_p = best * np.exp(np.linspace(-DENSE_HALF_WIDTH, DENSE_HALF_WIDTH, DENSE_POINTS))
         dense = np.array([_ratios(fm, levels, p, n_hits) for p in dense_p])
         cache[key] = (np.log(EXPLAIN_GRID), coarse, np.log(dense_p), dense)
     return cache[key]
