@@ -123,6 +123,13 @@ def main() -> None:
                   f"after {d['error_after']['rms_frequency_error_pct']:.4f} % (uncertainty "
                   f"{d['error_after']['rms_uncertainty_pct']:.3f} %), chi2 {d['error_after']['chi2']:.2f} for "
                   f"{d['error_after']['dof']} dof; {t_ex:.1f} s CPU")
+            amp = [e for e in d["effects"] if e["name"] == "amplitude_dependence"]
+            if amp:
+                p_ex = amp[0]["parameters"]["preload_factor"]["value"]
+                print("\n| level | measured | model at explain's preload | sigma | error / sigma |\n|---|---|---|---|---|")
+                for lv, x in zip(levels, fm.predict(p_ex)):
+                    print(f"| {lv.peak_force_n:.0f} N | {lv.frequency_hz:.2f} Hz | {x.frequency_hz:.2f} Hz | "
+                          f"{lv.sigma_hz():.2f} Hz | {(x.frequency_hz - lv.frequency_hz) / lv.sigma_hz():+.2f} |")
 
 
 if __name__ == "__main__":
