@@ -6,8 +6,14 @@ import numpy as np
 import pytest
 
 from guidefit.errors import ModelError
-from guidefit.nonlinear import (ForwardModel, apparent_mode, fit_levels, measure_levels, pulse_duration,
-                                simulate_force_levels)
+from guidefit.nonlinear import (
+    ForwardModel,
+    apparent_mode,
+    fit_levels,
+    measure_levels,
+    pulse_duration,
+    simulate_force_levels,
+)
 
 
 @pytest.fixture(scope="module")
