@@ -84,6 +84,8 @@ LEVEL_FLOOR = 5e-4
 FORWARD_MODEL_ERROR = 5e-4
 #: Band half-width of the one-pole fit: max(BAND_ZETAS zeta, BAND_MIN) of the peak frequency.
 BAND_ZETAS, BAND_MIN = 3.0, 0.03
+#: Bins over which the one-pole fit's weights rise from 0 to 1 at each end of its band.
+EDGE_BINS = 2.0
 #: The peak of a level is searched between these factors of the mode's small-amplitude frequency.
 PEAK_SEARCH = (0.6, 1.03)
 
@@ -163,7 +165,8 @@ def apparent_mode(frequency_hz, H, band_hz, exp_tau_s: float | None = None) -> M
     """One pole fitted to every channel of an FRF in ``band_hz``: the level's apparent mode.
 
     :func:`guidefit.modes.fit_modes` with one mode (channels scaled alike,
-    residual terms for the modes outside the band); with ``exp_tau_s`` the
+    residual terms for the modes outside the band, the bins' weights rising
+    linearly over :data:`EDGE_BINS` bins at the band's ends); with ``exp_tau_s`` the
     exponential window's damping is removed
     (:func:`guidefit.frf.exponential_window_damping_correction`), as identify
     does. The same function estimates the measured and the simulated levels.
@@ -178,10 +181,15 @@ def apparent_mode(frequency_hz, H, band_hz, exp_tau_s: float | None = None) -> M
     H = np.asarray(H)
     if H.ndim == 1:
         H = H[:, None]
+    lo, hi = (float(x) for x in band_hz)
+    # bins fade in over EDGE_BINS at the band's ends: a band that moves with the parameters then changes
+    # the fit continuously instead of by a whole bin (the forward model's least squares needs that)
+    ramp = EDGE_BINS * float(np.median(np.diff(f)))
+    weights = np.clip((f - lo) / ramp, 0.0, 1.0) * np.clip((hi - f) / ramp, 0.0, 1.0)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            mode = modes_mod.fit_modes(f, H, tuple(band_hz), 1)[0]
+            mode = modes_mod.fit_modes(f, H, (lo, hi), 1, weights=weights)[0]
     except (ValueError, np.linalg.LinAlgError) as exc:
         raise IdentificationError(f"no mode in {band_hz[0]:.0f}-{band_hz[1]:.0f} Hz ({exc})") from None
     fit = ModeFit(float(mode.frequency_hz), mode.frequency_std_hz, float(mode.damping_ratio))
@@ -596,20 +604,23 @@ def _residuals(fm: ForwardModel, f_meas, sigma, theta, fit_kn: bool, kn_fixed: f
 
 
 def _first_guess(fm: ForwardModel, f_meas, sigma, lowest: int) -> tuple[float, float]:
-    """(p, k) on :data:`PRELOAD_GRID`, k from the lowest level at small amplitude; one hit per level."""
+    """(p, k): the minimum of a spline through the costs on :data:`PRELOAD_GRID` (one hit per level),
+    k from the lowest level at small amplitude."""
     label = fm.levels[lowest].label
-    best = (math.inf, 1.0, 1.0)
+
+    def k_of(p):
+        return float(np.clip((f_meas[lowest] / fm.small_amplitude_hz(p, 1.0)[label]) ** 2, *KN_BOUNDS))
+
+    costs = []
     for p in PRELOAD_GRID:
         try:
-            f_lin = fm.small_amplitude_hz(p, 1.0)[label]
+            k = k_of(p)
+            r = _residuals(fm, f_meas, sigma, np.log([p, k * p ** (1.0 / 9.0)]), True, k, n_hits=1)
+            costs.append(float(r @ r))
         except ModelError:
-            continue
-        k = float(np.clip((f_meas[lowest] / f_lin) ** 2, *KN_BOUNDS))
-        r = _residuals(fm, f_meas, sigma, np.log([p, k]), True, k, n_hits=1)
-        cost = float(r @ r)
-        if cost < best[0]:
-            best = (cost, p, k)
-    return best[1], best[2]
+            costs.append(math.inf)
+    p = _coarse_minimum(np.log(PRELOAD_GRID), np.array(costs))
+    return p, k_of(p)
 
 
 def fit_levels(levels, guide="MRB35", fit_kn: bool = True, kn_factor: float = 1.0, n_hits: int = SIM_HITS,
@@ -645,7 +656,7 @@ def fit_levels(levels, guide="MRB35", fit_kn: bool = True, kn_factor: float = 1.
     lo = np.log([PRELOAD_BOUNDS[0], KN_BOUNDS[0] * PRELOAD_BOUNDS[0] ** (1 / 9)][: x0.size])
     hi = np.log([PRELOAD_BOUNDS[1], KN_BOUNDS[1] * PRELOAD_BOUNDS[1] ** (1 / 9)][: x0.size])
     res = least_squares(lambda th: _residuals(fm, f_meas, sigma, th, fit_kn, kn_factor), np.clip(x0, lo, hi),
-                        bounds=(lo, hi), diff_step=3e-3, x_scale=1.0, xtol=1e-3, ftol=1e-6, max_nfev=30)
+                        bounds=(lo, hi), diff_step=1e-2, x_scale=1.0, xtol=1e-3, ftol=1e-6, max_nfev=30)
     chi2 = float(res.fun @ res.fun)
     dof = len(levels) - x0.size
     try:
@@ -687,10 +698,12 @@ def prepare_for_explain(identification, modes, levels, notes: list):
     Each group of runs found by :func:`measure_levels` with two or more
     runs gives :class:`guidefit.explain.ForceLevel` entries (named after its
     lowest run, so they form one trend with the mode identified there), and
-    the measured setups are registered for :func:`forward` (the simulated
-    forward model). Every mode, labelled or extra, of the group's harder runs
-    is left out: a peak distorted or split by contact loss is that level's
-    nonlinear mode, which enters through the level, never an extra mode.
+    the measured setups are registered for the simulated forward model
+    (``amplitude_dependence``'s ``forward``). When the levels change with
+    force (p < :data:`TREND_P_VALUE`), every mode, labelled or extra, of the
+    group's harder runs is left out: a peak distorted or split by contact
+    loss is that level's nonlinear mode, which enters through the level,
+    never an extra mode.
     Returns ``(modes, levels)``.
     """
     from guidefit.explain import ForceLevel
@@ -704,7 +717,8 @@ def prepare_for_explain(identification, modes, levels, notes: list):
         runs = sorted({lv.run for lv in group}, key=lambda r: min(x.peak_force_n for x in group if x.run == r))
         if len(runs) < 2:
             continue  # one run with a force spread: identify's own force levels cover it
-        harder.update(runs[1:])
+        if _trend_p(group) < TREND_P_VALUE:  # contact loss distorts the harder runs' peaks
+            harder.update(runs[1:])
         out = [x for x in out if x.run not in runs]
         for lv in group:
             _SETUPS[_key(runs[0], lv.label, lv.frequency_hz)] = lv
@@ -718,6 +732,21 @@ def prepare_for_explain(identification, modes, levels, notes: list):
         notes.append(f"runs {', '.join(sorted(harder))}: force levels of one test (the same hits, harder); "
                      f"their {len(dropped)} mode(s) enter through the levels, not as modes or extra peaks")
     return modes, out
+
+
+#: Levels whose de-meaned frequencies have a chi-square p-value below this change with force.
+TREND_P_VALUE = 0.01
+
+
+def _trend_p(group) -> float:
+    """p-value of "the frequency does not change with force" over a group of levels."""
+    from scipy.stats import chi2 as chi2_dist
+
+    f = np.array([lv.frequency_hz for lv in group])
+    s = np.array([lv.sigma_hz() for lv in group])
+    w = s**-2.0
+    z = (f - np.sum(w * f) / np.sum(w)) / s
+    return float(chi2_dist.sf(float(z @ z), len(group) - 1))
 
 
 def registered_levels(levels_data) -> list | None:
