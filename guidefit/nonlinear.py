@@ -779,6 +779,15 @@ def _coarse_minimum(x, cost) -> float:
     return float(math.exp(fine[int(np.argmin(CubicSpline(x[ok], np.log1p(cost[ok]))(fine)))]))
 
 
+def _ratio_cost(levels, ratios) -> np.ndarray:
+    """Misfit of each row of ratios, the lowest level anchoring the small-amplitude frequency."""
+    f = np.array([lv.frequency_hz for lv in levels])
+    sigma = np.array([lv.sigma_hz() for lv in levels])
+    low = int(np.argmin([lv.peak_force_n for lv in levels]))
+    return np.array([np.nansum(((f[low] / r[low] * r - f) / sigma) ** 2) if np.isfinite(r[low]) else math.inf
+                     for r in ratios])
+
+
 def ratio_table(guide, levels, cache: dict, n_hits: int = SIM_HITS):
     """Apparent / small-amplitude frequency of each level against ln p (cached per explain call).
 
@@ -786,7 +795,9 @@ def ratio_table(guide, levels, cache: dict, n_hits: int = SIM_HITS):
     the preload factor p* whose ratios fit the measured levels best (the
     lowest level anchoring the small-amplitude frequency; minimum of a spline
     through the grid's costs); :data:`DENSE_POINTS` factors within
-    ``p* exp(+/- DENSE_HALF_WIDTH)`` are then simulated with ``n_hits`` hits. Returns
+    ``p* exp(+/- DENSE_HALF_WIDTH)`` are then simulated with ``n_hits`` hits,
+    and the window is moved (up to three times, points kept) while the
+    minimum of their costs lies in its outer fifths. Returns
     ``(coarse ln p, coarse ratios, dense ln p, dense ratios)``; explain scales
     its candidate's small-amplitude frequency by the interpolated ratio.
     """
@@ -794,15 +805,20 @@ def ratio_table(guide, levels, cache: dict, n_hits: int = SIM_HITS):
     if key not in cache:
         fm = ForwardModel(guide, levels, n_hits)
         coarse = np.array([_ratios(fm, levels, p, 1) for p in EXPLAIN_GRID])
-        f = np.array([lv.frequency_hz for lv in levels])
-        sigma = np.array([lv.sigma_hz() for lv in levels])
-        low = int(np.argmin([lv.peak_force_n for lv in levels]))
-        cost = [np.nansum(((f[low] / r[low] * r - f) / sigma) ** 2) if np.isfinite(r[low]) else math.inf
-                for r in coarse]
-        best = _coarse_minimum(np.log(EXPLAIN_GRID), np.asarray(cost, float))
-        dense_p = best * np.exp(np.linspace(-DENSE_HALF_WIDTH, DENSE_HALF_WIDTH, DENSE_POINTS))
-        dense = np.array([_ratios(fm, levels, p, n_hits) for p in dense_p])
-        cache[key] = (np.log(EXPLAIN_GRID), coarse, np.log(dense_p), dense)
+        best = _coarse_minimum(np.log(EXPLAIN_GRID), _ratio_cost(levels, coarse))
+        xs, rows = [], []
+        for _ in range(4):
+            for lp in math.log(best) + np.linspace(-DENSE_HALF_WIDTH, DENSE_HALF_WIDTH, DENSE_POINTS):
+                if not any(abs(lp - x) < 1e-3 for x in xs):
+                    xs.append(float(lp))
+                    rows.append(_ratios(fm, levels, math.exp(lp), n_hits))
+            order = np.argsort(xs)
+            xd, rd = np.array(xs)[order], np.array(rows)[order]
+            best = _coarse_minimum(xd, _ratio_cost(levels, rd))
+            inner = 0.6 * (xd[-1] - xd[0]) / 2
+            if abs(math.log(best) - 0.5 * (xd[0] + xd[-1])) <= inner or not PRELOAD_BOUNDS[0] < best < PRELOAD_BOUNDS[1]:
+                break
+        cache[key] = (np.log(EXPLAIN_GRID), coarse, xd, rd)
     return cache[key]
 
 
