@@ -426,7 +426,8 @@ def _bin_frf(run, rr, wanted: set, whole: bool):
     return frf, float(np.median(pulses)), shape
 
 
-def measure_levels(identification, labels=("vertical",), force_bins: int = 3, notes: list | None = None):
+def measure_levels(identification, labels=("vertical",), force_bins: int = 3, notes: list | None = None,
+                   min_runs: int = 1):
     """The apparent frequency of each labelled mode on each force level of an identification.
 
     Runs with the same hit point, direction, sensors, sample rate and record
@@ -437,8 +438,10 @@ def measure_levels(identification, labels=("vertical",), force_bins: int = 3, no
     identify); on each level it is fitted by :func:`apparent_mode` in the
     band of :func:`level_band` (channels weighted by the mode's shape).
 
-    Returns a list of :class:`MeasuredLevel` (grouped by test, then label,
-    forces increasing); problems go to ``notes``.
+    ``min_runs``: groups of fewer runs are skipped (explain measures only
+    levels across runs; identify gives those within one run). Returns a list
+    of :class:`MeasuredLevel` (grouped by test, then label, forces
+    increasing); problems go to ``notes``.
     """
     from guidefit.recording import read_recording
 
@@ -450,6 +453,8 @@ def measure_levels(identification, labels=("vertical",), force_bins: int = 3, no
         groups.setdefault(_group_key(run, rr.channels), []).append((run, rr))
     out = []
     for members in groups.values():
+        if len(members) < min_runs:
+            continue
         bins = [(run, rr, wanted, forces, len(_bins(rr.hits, force_bins)) == 1)
                 for run, rr in members for wanted, forces in _bins(rr.hits, force_bins)]
         means = [float(np.mean(b[3])) for b in bins]
@@ -708,7 +713,9 @@ def prepare_for_explain(identification, modes, levels, notes: list):
     """
     from guidefit.explain import ForceLevel
 
-    found = measure_levels(identification, notes=notes)
+    if len(identification.runs) < 2:
+        return modes, list(levels)
+    found = measure_levels(identification, notes=notes, min_runs=2)
     by_group: dict = {}
     for lv in found:
         by_group.setdefault((lv.setup.hit_position_m, lv.setup.hit_direction, lv.label), []).append(lv)
