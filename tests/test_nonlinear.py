@@ -48,7 +48,9 @@ def test_levels_follow_contact_loss(levels):
     for lv, force in zip(levels, (100.0, 1000.0, 5000.0), strict=True):
         assert abs(lv.peak_force_n / force - 1) < 0.06
     f = [lv.frequency_hz for lv in levels]
-    assert abs(f[0] / 3529.0 - 1) < 2e-3
+    # the apparent frequency is the peak's centroid: above f_n by the accelerance peak's offset and the
+    # exponential window's extra damping, a few tenths of a percent
+    assert 0 < f[0] / 3529.0 - 1 < 5e-3
     assert 0 < f[0] - f[1] < f[1] - f[2]
     assert f[2] < 0.95 * f[0]
     assert all(math.isclose(lv.setup.pulse_s, 1e-4, rel_tol=0.02) for lv in levels)
