@@ -7,7 +7,8 @@ sample rate, anti-alias filter, sensor noise, 16-bit ADC) is the "truth".
 Its levels are measured by ``guidefit.nonlinear.measure_levels`` (windows,
 H1, one-pole fit). At the true preload factor the script predicts every
 level with the forward model (``ForwardModel.predict``) and with the
-describing function of ``amplitude_dependence``, then fits the preload
+describing function of ``amplitude_dependence`` (which models a one-pole
+fit, not the peak centroid: compared as drops from the lowest level), then fits the preload
 factor (and K_n) with ``fit_levels`` and runs ``guidefit.explain`` on the
 file. Prints markdown tables (docs/explain.md, "Nonlinear contacts: the
 forward model").
@@ -96,14 +97,15 @@ def main() -> None:
         print(f"simulation {t_sim:.1f} s, identify {t_id:.1f} s, one forward-model evaluation "
               f"({len(levels)} levels x {fm.n_hits} hits) {t_fwd:.2f} s CPU; notes: {notes}\n")
         print("| level | rollers losing contact (of 84) | truth (full chain) | forward model | error | "
-              "describing function | error |")
-        print("|---|---|---|---|---|---|---|")
-        for lv, p in zip(levels, pred):
-            df = describing_function(guide, lv, args.preload)
+              "drop from the lowest level: truth | forward model | describing function |")
+        print("|---|---|---|---|---|---|---|---|")
+        dfs = [describing_function(guide, lv, args.preload) for lv in levels]
+        for lv, p, df in zip(levels, pred, dfs):
             n_lost = lost_contact(model, lv, float(np.max(lv.hit_forces_n)))
             print(f"| {lv.peak_force_n:.0f} N | {n_lost} | {lv.frequency_hz:.1f} Hz | {p.frequency_hz:.1f} Hz | "
-                  f"{100 * (p.frequency_hz / lv.frequency_hz - 1):+.3f} % | {df:.1f} Hz | "
-                  f"{100 * (df / lv.frequency_hz - 1):+.2f} % |")
+                  f"{100 * (p.frequency_hz / lv.frequency_hz - 1):+.3f} % | "
+                  f"{100 * (lv.frequency_hz / levels[0].frequency_hz - 1):+.3f} % | "
+                  f"{100 * (p.frequency_hz / pred[0].frequency_hz - 1):+.3f} % | {100 * (df / dfs[0] - 1):+.3f} % |")
         fit = fit_levels(levels, guide)
         print(f"\nfit_levels: preload factor {fit.preload_factor:.4f} +/- {fit.preload_std:.4f} "
               f"(truth {args.preload}), K_n factor {fit.kn_factor:.4f} +/- {fit.kn_std:.4f}, chi2 {fit.chi2:.2f} "
