@@ -104,3 +104,62 @@ def test_shape_scatter_over_force_bins():
     assert _level_shape_scatter(mode, list("abcd"), unit, tilted) == pytest.approx(expected, rel=1e-9)
     other_run = [ForceLevel(300.0, "pitch", 2202.0, 1.0, run="vertical", shape=dict(zip("abcd", perp)))] * 2
     assert _level_shape_scatter(mode, list("abcd"), unit, other_run) == 0.0
+
+
+def test_runs_that_differ_only_in_hit_force_are_one_trend():
+    """Three vertical runs at 100 N, 1 kN and 5 kN, same hit point and direction: one experiment, one trend.
+
+    Each run's mode is predicted at its own run's force; the levels of the
+    three runs form one (experiment, label) group whose trend is compared,
+    and ``amplitude_dependence`` is tried on it. Without a hit point and
+    direction the runs cannot be told to be one test: three single levels,
+    no trend.
+    """
+    from dataclasses import replace
+
+    from guidefit.explain.candidates import level_trend
+    from guidefit.explain.data import prepare
+    from guidefit.explain.settings import DEFAULT_HITS
+    from guidefit.model.guides import load_guide
+
+    guide = load_guide("MRB35")
+    point, direction = DEFAULT_HITS["vertical"]
+    forces, freqs = (100.0, 1000.0, 5000.0), (3529.0, 3462.0, 2905.0)
+    runs = [f"vertical {F:.0f} N" for F in forces]
+    modes = [MeasuredMode(f, 0.5, label="vertical", run=r) for f, r in zip(freqs, runs)]
+    levels = [ForceLevel(F, "vertical", f, 0.5, hit_position_m=point, hit_direction=direction, run=r)
+              for F, f, r in zip(forces, freqs, runs)]
+    data = prepare(modes, guide, [], levels, [])
+    assert [sorted(g.tolist()) for g in data.lv_groups] == [[0, 1, 2]]
+    assert data.mode_levels == [[0], [1], [2]]
+    np.testing.assert_allclose(data.mode_force, forces, rtol=1e-12)
+    chi2, dof, p = level_trend(data)
+    assert chi2 > 100.0
+    assert dof == 2 and p < 1e-6
+    notes: list = []
+    plain = prepare(modes, guide, [], [replace(lv, hit_position_m=None, hit_direction=None) for lv in levels], notes)
+    assert plain.lv_f.size == 0 and any("3 force level(s) not used" in n for n in notes)
+    result = explain_modes(modes, guide, force_levels=levels, candidates=["amplitude_dependence"])
+    assert not any(n.startswith("amplitude_dependence not tried") for n in result.notes)
+    assert any(c["name"] == "amplitude_dependence" for c in result.candidates)
+
+
+def test_a_model_that_cannot_be_evaluated_has_as_many_residuals_as_one_that_can():
+    """least_squares needs one length: a failed model (a segment with first > last) with shapes and level groups."""
+    from guidefit.explain import synthetic_modes
+    from guidefit.explain.data import prepare
+    from guidefit.explain.evaluation import Context, evaluate
+    from guidefit.model.effects import Effect, make_effect
+    from guidefit.model.guides import load_guide
+    from guidefit.model.vibration import model_from_guide
+
+    guide = load_guide("MRB35")
+    modes, sensors, levels = synthetic_modes(guide, [make_effect("contact_stiffness", {"factor": 0.9})],
+                                             forces=(100.0, 600.0, 1500.0))
+    data = prepare(modes, guide, sensors, levels, [])
+    assert data.lv_groups and data.shapes
+    ctx = Context(guide, model_from_guide(guide))
+    good = evaluate(ctx, data, [make_effect("contact_stiffness", {"factor": 0.9})])
+    bad = evaluate(ctx, data, [Effect("row_segment", {"row": 1, "first": 15.0, "last": 3.0, "factor": 0.5})])
+    assert good.ok and not bad.ok
+    assert bad.r.shape == good.r.shape

@@ -42,6 +42,15 @@ def variants(ctx) -> list[Variant]:
     return [Variant("added_mass", f"at {t}", {"at": t}, (mass,)) for t in tags]
 
 
+def ambiguity(tags) -> str | None:
+    """Two or more single corners equally good: only the mode shapes tell them apart."""
+    corners = [t for t in tags if t.startswith("at ") and len(t) == 4]
+    if len(corners) > 1:
+        return ("a mass at A, B, C or D gives identical frequencies (mirror symmetry); "
+                "only mode shapes at A-D tell which corner")
+    return None
+
+
 EFFECT = EffectDef(
     name="added_mass",
     meaning="unmodelled mass on the carriage (undeclared accelerometers, fixtures, bolts)",
@@ -53,4 +62,5 @@ EFFECT = EffectDef(
                "undeclared accelerometers, cables, fixtures; masses at the measuring points add rotational "
                "inertia, a mass at the centre does not"),
     order=10,
+    ambiguity=ambiguity,
 )

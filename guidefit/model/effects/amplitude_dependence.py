@@ -314,6 +314,18 @@ def variants(ctx) -> list[Variant]:
                     (log_free("preload_factor", "1", 0.01, 10.0, (0.03, 0.1, 0.2, 0.35, 0.5, 0.7, 1.0, 2.0, 5.0)),))]
 
 
+def prepare(identification, modes, levels, notes):
+    """Force levels across runs that differ only in hit force (:func:`guidefit.nonlinear.prepare_for_explain`):
+    measured with the level estimator of the forward model, the harder runs' modes entering through them."""
+    from guidefit import nonlinear
+    from guidefit.errors import RecordingError
+
+    try:
+        return nonlinear.prepare_for_explain(identification, modes, levels, notes)
+    except OSError as exc:  # the recording moved or vanished since identify read it
+        raise RecordingError(f"{identification.file}: cannot be read again for its force levels ({exc})") from None
+
+
 EFFECT = EffectDef(
     name="amplitude_dependence",
     meaning="nonlinear preloaded Hertz contacts: stiffness falls as hits unload the rows",
@@ -328,5 +340,6 @@ EFFECT = EffectDef(
     gate=gate,
     forward=forward,
     accept=accept,
+    prepare=prepare,
     nonlinear=True,
 )

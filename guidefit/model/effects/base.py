@@ -202,7 +202,10 @@ class ForwardRequest:
     ``mode_measured_hz``: the measured frequencies; ``model_damping``: per
     model mode the damping ratio of its measured partner (nan unknown);
     ``level_model``: per level the model mode it refers to (-1 none);
-    ``cache``: scratch space for one explain call.
+    ``levels``: the force levels compared (:class:`LevelData`);
+    ``guide``: the guide; ``effects``: every effect of the candidate
+    (:class:`Effect`, this one included); ``cache``: scratch space for one
+    explain call.
     """
 
     guide: object
@@ -280,9 +283,24 @@ class EffectDef:
         ``forward(ForwardRequest) -> Forward`` for effects whose prediction is
         not the linear eigen-solution (``nonlinear`` effects).
     accept : callable, optional
-        ``accept(evaluation) -> str | None``: why a fitted candidate with
-        this effect is not accepted beyond the chi-square and
-        identifiability tests (e.g. no trend over force levels).
+        ``accept(levels: LevelData, level_hz) -> str | None``: why a fitted
+        candidate with this effect is not accepted beyond the chi-square and
+        identifiability tests (e.g. no trend over force levels), given the
+        fitted model's prediction of every force level.
+    prepare : callable, optional
+        ``prepare(identification, modes, levels, notes) -> (modes, levels)``:
+        data the effect gathers from an :class:`~guidefit.identify.Identification`
+        beyond identify's modes and force levels (``amplitude_dependence``:
+        force levels across runs that differ only in hit force); called by
+        :func:`guidefit.explain.explain_identification` for every candidate
+        effect, in library order. ``modes`` are
+        :class:`~guidefit.explain.MeasuredMode`, ``levels``
+        :class:`~guidefit.explain.ForceLevel`; a
+        :class:`~guidefit.errors.GuidefitError` becomes a note.
+    ambiguity : callable, optional
+        ``ambiguity(tags) -> str | None``: a note for when several of its
+        variants (their tags) explain the data equally well (e.g. the
+        mirror-symmetric corners of ``added_mass``).
     aliases : tuple of str
         Other names ``--effect``, ``make_effect`` and JSON readers accept.
     nonlinear : bool
@@ -301,6 +319,8 @@ class EffectDef:
     gate: Callable | None = None
     forward: Callable | None = None
     accept: Callable | None = None
+    prepare: Callable | None = None
+    ambiguity: Callable | None = None
     aliases: tuple = ()
     nonlinear: bool = False
 

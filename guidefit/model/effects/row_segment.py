@@ -62,6 +62,14 @@ def variants(ctx) -> list[Variant]:
     return [Variant("row_segment", f"row {r}", {"row": r}, (first, last, factor), tuple(starts)) for r in (1, 2, 3, 4)]
 
 
+def ambiguity(tags) -> str | None:
+    """Several rows equally good: mirror images that only the mode shapes tell apart."""
+    if len(tags) > 1:
+        return ("rows 1 and 2 (and 3 and 4) are mirror images, as are the two ends of a row: only mode shapes "
+                "at A-D tell them apart")
+    return None
+
+
 EFFECT = EffectDef(
     name="row_segment",
     meaning="part of one roller row at its own stiffness (local raceway damage)",
@@ -77,4 +85,5 @@ EFFECT = EffectDef(
                "frequencies and shapes"),
     order=65,
     excludes=frozenset({"row_damage"}),
+    ambiguity=ambiguity,
 )
