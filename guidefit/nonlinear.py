@@ -752,7 +752,7 @@ def prepare_for_explain(identification, modes, levels, notes: list):
     never an extra mode.
     Returns ``(modes, levels)``.
     """
-    from guidefit.explain import ForceLevel
+    from guidefit.explain.inputs import ForceLevel
 
     if len(identification.runs) < 2:
         return modes, list(levels)
