@@ -4,8 +4,8 @@ A preloaded Hertz roller (Palmgren, Eq. 4: ``Q = C delta^(10/9)`` for
 ``delta > 0``, see :mod:`guidefit.model.static`) softens as a hit unloads it
 and carries nothing once it lifts off. A carriage hit harder and harder
 therefore rings at a lower and lower *apparent* frequency: with the MRB35
-preload, hits of about 1 kN and more lift whole rows, and the vertical peak
-of a 5 kN hit is skewed and split. What a modal fit of such a peak finds is
+preload, a 1 kN hit lifts nearly every roller during its first cycles, and
+the vertical peak of a 5 kN hit is skewed and split. What a modal fit of such a peak finds is
 not a property of the carriage alone; it depends on the hit, on the windows,
 on the FRF estimator and on the fit. So the measurement is compared with a
 simulation of the same experiment, passed through the same chain:
@@ -14,11 +14,14 @@ simulation of the same experiment, passed through the same chain:
    force (the same hit point, direction and sensors) are levels of one test;
    a run whose hit forces spread by :data:`FORCE_RATIO` is split into force
    terciles. Each level's hits are averaged with the run's windows and
-   estimator (:func:`guidefit.frf.compute_frf`), and the mode is fitted with
-   one pole (:func:`apparent_mode`, :func:`guidefit.modes.fit_modes`) in a
-   band of +/- max(3 zeta, 3 %) around its peak on that level (the peak
-   found between 0.6 and 1.03 times the mode's small-amplitude frequency):
-   the apparent frequency and damping of that level.
+   estimator (:func:`guidefit.frf.compute_frf`); the level's apparent
+   frequency is the centroid of the fourth power of the mode-weighted FRF
+   power between 0.6 and 1.15 times the mode's small-amplitude frequency
+   (:func:`peak_centroid`, jackknife std over the hit groups), its damping
+   that of one pole fitted around it (:func:`apparent_mode`,
+   :func:`guidefit.modes.fit_modes`): :func:`level_estimate`. The centroid
+   moves continuously with the model's parameters where a one-pole fit
+   jumps between the lobes of a peak split by contact loss.
 2. **Forward model** (:class:`ForwardModel`). For a preload factor ``p``
    (``Delta' = p Delta``) and a roller-stiffness factor ``k`` (``K_n`` scaled),
    each level's hits are simulated in the time domain with the preloaded
@@ -30,24 +33,28 @@ simulation of the same experiment, passed through the same chain:
    axes, for the measured record length and pretrigger, at a sample rate of
    at least :data:`SIM_RATE_MIN_HZ` (an integer fraction of the measured one,
    so the FRF has the same bins). The records go through the same windows
-   (the measured run's force window and exponential window), the same
-   estimator and the same one-pole fit in the same band as the measurement.
-   Results are cached by parameters.
+   (the measured run's force window and exponential window), the same FRF
+   estimator and :func:`level_estimate`, the peak searched from the model's
+   own small-amplitude frequency. Results are cached by parameters.
 3. **Fit** (:func:`fit_levels`). ``ln p`` (and ``ln k``, fixed mainly by the
    lowest level, where the contacts are linear) are fitted to the levels'
    apparent frequencies by :func:`scipy.optimize.least_squares`; the standard
    deviations come from the Jacobian, ``cov = (J^T J)^-1 max(1, chi2/dof)``.
-   Each level's uncertainty is the one-pole fit's standard deviation with a
+   Each level's uncertainty is its jackknife standard deviation with a
    floor of :data:`LEVEL_FLOOR` of the frequency (the model-form floor of
    explain) and the forward model's own numerical error
    (:data:`FORWARD_MODEL_ERROR`, measured against the full simulation chain by
-   ``benchmarks/bench_nonlinear.py``). The first guess is a coarse grid over
-   ``p`` with one simulated hit per level.
+   ``benchmarks/bench_nonlinear.py``). The first guess is the minimum of a
+   spline through the costs on a coarse grid over ``p`` with one simulated
+   hit per level.
+4. **explain** (:func:`prepare_for_explain`, the ``prepare`` hook of
+   ``amplitude_dependence``; its ``forward`` uses :func:`level_predictions`).
 
-The describing function of :mod:`guidefit.explain` (the RMS of the modal
-amplitudes in a narrow band around the small-amplitude frequency) is accurate
-below lift-off only: 0.2 % off at 1 kN and 1.9 % at 5 kN on the MRB35 (table
-in ``docs/explain.md``, "Nonlinear contacts: the forward model").
+The describing function of ``amplitude_dependence`` (the RMS of the modal
+amplitudes, a chirp fitted in a narrow band around the small-amplitude
+frequency) follows the drop only below lift-off: -0.12 % for a measured
+-0.28 % at 1 kN and -3.7 % for -14.4 % at 5 kN on the MRB35 (tables in
+``docs/explain.md``, "Nonlinear contacts: the forward model").
 
 Examples
 --------
