@@ -767,13 +767,14 @@ def prepare_for_explain(identification, modes, levels, notes: list):
     by_group: dict = {}
     for lv in found:
         by_group.setdefault((lv.setup.hit_position_m, lv.setup.hit_direction, lv.label), []).append(lv)
-    harder, out = set(), list(levels)
+    harder, lowest, out = set(), set(), list(levels)
     for group in by_group.values():
         runs = sorted({lv.run for lv in group}, key=lambda r: min(x.peak_force_n for x in group if x.run == r))
         if len(runs) < 2:
             continue  # one run with a force spread: identify's own force levels cover it
         if _trend_p(group) < TREND_P_VALUE:  # contact loss distorts the harder runs' peaks
             harder.update(runs[1:])
+            lowest.add(runs[0])
         out = [x for x in out if x.run not in runs]
         for lv in group:
             _SETUPS[_key(runs[0], lv.label, lv.frequency_hz)] = lv
@@ -784,9 +785,22 @@ def prepare_for_explain(identification, modes, levels, notes: list):
     if harder:
         dropped = [m for m in modes if m.run in harder]
         modes = [m for m in modes if m.run not in harder]
+        added = _lowest_run_modes(identification, lowest, modes, {m.label for m in dropped})
         notes.append(f"runs {', '.join(sorted(harder))}: force levels of one test (the same hits, harder); "
-                     f"their {len(dropped)} mode(s) enter through the levels, not as modes or extra peaks")
+                     f"their {len(dropped)} mode(s) enter through the levels, not as modes or extra peaks"
+                     + (f"; {len(added)} mode(s) of the lowest run instead" if added else ""))
+        modes += added
     return modes, out
+
+
+def _lowest_run_modes(identification, lowest: set, kept: list, labels: set) -> list:
+    """The lowest runs' own labelled modes of the labels that identify had taken from a harder run."""
+    from guidefit.explain.modes_json import modes_from_result
+
+    have = {(m.run, m.label) for m in kept}
+    entries = [im.to_dict() for rr in identification.runs if rr.name in lowest for im in rr.modes
+               if im.label in labels and im.label != "extra" and (rr.name, im.label) not in have]
+    return modes_from_result({"modes": entries}, str(identification.file))[0] if entries else []
 
 
 #: Levels whose de-meaned frequencies have a chi-square p-value below this change with force.
