@@ -801,8 +801,6 @@ def _hit_faults(faults, run_name: str, hit: int, n_hits: int) -> list:
 
 def _simulate_hit(model: _Model, config, run: HammerRun, channels, hit: int, seed: int, faults):
     """One hit record: (data (n_samples, n_ch) as stored, hit truth dict)."""
-    from guidefit.model import vibration as vib
-
     names, _units, positions, directions = channels
     fs = config.sample_rate_hz
     n_rec = round(config.record_s * fs)
@@ -826,27 +824,74 @@ def _simulate_hit(model: _Model, config, run: HammerRun, channels, hit: int, see
     truth["pulses"] = [{"peak_force_n": p[0], "onset_s": p[1], "duration_s": p[2]} for p in pulses]
 
     t_int = np.arange(n_rec * os_) / (fs * os_)
-    d = np.asarray(run.direction, float)
+    force, acc = hit_response(model, run.position_m, run.direction, pulses, t_int, positions[1:], directions[1:],
+                              substeps=config.substeps, tolerance=config.nonlinear_tolerance)
+    signals = _decimate(np.column_stack([force, acc]), os_, config.anti_alias)
+    return _measure(signals, config, names, noise, faults, rng_loose=_rng(seed, run.name, hit, 2)), truth
+
+
+def hit_response(model: _Model, position_m, direction, pulses, t_s, sensor_positions_m, sensor_directions,
+                 substeps: int = 1, tolerance: float = 1.0e-2):
+    """Hammer force and sensor accelerations of one hit, before the measurement chain.
+
+    The forward model of the module docstring: the exact modal response of a
+    linear model, or the RK4 integration of the preloaded Hertz contacts
+    (:func:`integrate_contacts`) when ``model`` has nonlinear contacts. Used by
+    :func:`simulate` (at the oversampled internal rate) and by
+    :mod:`guidefit.nonlinear` (the forward model of measured force levels).
+
+    Parameters
+    ----------
+    model : the result of :func:`build_model`
+    position_m, direction : (3,)
+        Hit point (m, carriage frame) and force direction (any length).
+    pulses : iterable of (F0_n, t0_s, T_s)
+        Half-sine pulses: peak force (N), onset (s), duration (s).
+    t_s : array (n_t,)
+        Equidistant instants from 0 (s).
+    sensor_positions_m, sensor_directions : (n_s, 3)
+        Accelerometer points and unit measuring axes.
+    substeps, tolerance
+        As for :func:`integrate_contacts` (nonlinear contacts only).
+
+    Returns
+    -------
+    force_n : ndarray (n_t,)
+    acceleration_m_s2 : ndarray (n_t, n_s)
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> model = build_model("MRB35")
+    >>> t = np.arange(400) / 200e3
+    >>> f, a = hit_response(model, (0, 0, 0), (0, -1, 0), [(100.0, 1e-4, 1e-4)], t, [(0.03, 0, 0.045)], [(0, 1, 0)])
+    >>> f.shape, a.shape, round(float(f.max()), 1)
+    ((400,), (400, 1), 100.0)
+    """
+    from guidefit.model import vibration as vib
+
+    t_int = np.asarray(t_s, float)
+    d = np.asarray(direction, float)
     d = d / np.linalg.norm(d)
     sol = model.solution
-    sensor_rows = np.array([dr @ vib.rigid_body_map(p) for p, dr in zip(positions[1:], directions[1:])])
+    sensor_rows = np.array([np.asarray(dr, float) @ vib.rigid_body_map(p)
+                            for p, dr in zip(sensor_positions_m, sensor_directions)])
     b_q = np.zeros(sol.shapes.shape[0])
-    b_q[:5] = d @ vib.rigid_body_map(run.position_m)
+    b_q[:5] = d @ vib.rigid_body_map(position_m)
     if model.contacts is None:
         b = b_q @ sol.shapes  # modal participation of the hammer
         eta_dd = half_sine_modal_acceleration(t_int, sol.frequencies_hz, model.damping, pulses) * b
         acc = eta_dd @ (sensor_rows @ sol.shapes[:5]).T
     else:
-        q_dd = integrate_contacts(model.contacts, b_q, pulses, t_int, substeps=config.substeps,
-                                  tolerance=config.nonlinear_tolerance, solution=sol, damping=model.damping)
+        q_dd = integrate_contacts(model.contacts, b_q, pulses, t_int, substeps=substeps,
+                                  tolerance=tolerance, solution=sol, damping=model.damping)
         acc = q_dd[:, :5] @ sensor_rows.T
     force = np.zeros(len(t_int))
     for f0, t0, dur in pulses:
         tau = t_int - t0
         inside = (tau > 0) & (tau < dur)
         force[inside] += f0 * np.sin(math.pi * tau[inside] / dur)
-    signals = _decimate(np.column_stack([force, acc]), os_, config.anti_alias)
-    return _measure(signals, config, names, noise, faults, rng_loose=_rng(seed, run.name, hit, 2)), truth
+    return force, acc
 
 
 def _ranges(config, names) -> np.ndarray:

@@ -187,13 +187,52 @@ def decay_fit_frequency(w0: float, w_of_time: np.ndarray, zeta: float, band: flo
     return float(abs(pole) / (2 * math.pi))
 
 
-def forward(req) -> Forward:
-    """The describing-function prediction of every measured mode and force level (see the module docstring).
+def simulated_forward(req, measured) -> Forward:
+    """The forward model of :mod:`guidefit.nonlinear`: every level's hits simulated with the Hertz law and
+    passed through the measurement's windows, H1 and one-pole fit.
 
-    A mode whose FRF came from hits with force levels is predicted as the
-    H1 (sum F^2) weighted mean of its levels' predictions; one without at
-    small amplitude.
+    ``measured``: the registered :class:`guidefit.nonlinear.MeasuredLevel` of
+    each level. The simulated apparent/small-amplitude frequency ratio of the
+    guide (on a grid of preload factors, interpolated) scales the candidate
+    model's small-amplitude frequency, so other linear effects combine with
+    it; a mode compared through its levels is their H1 (sum F^2) weighted
+    mean. Model-form error: :data:`guidefit.nonlinear.FORWARD_MODEL_ERROR`.
     """
+    from guidefit import nonlinear
+
+    fm, lv, pairing = req.solution.frequencies_hz, req.levels, req.mode_model
+    ok = req.level_model >= 0
+    small = np.where(ok, fm[np.maximum(req.level_model, 0)], np.nan)
+    level_hz = np.where(ok, nonlinear.level_predictions(req.guide, measured, small, req.parameters["preload_factor"],
+                                                        req.cache), np.nan)
+    paired = pairing >= 0
+    f_pred = np.where(paired, fm[np.maximum(pairing, 0)], np.nan)
+    for i in np.flatnonzero(paired):
+        # the levels measure their own mode only; another mode of the lowest run is at small amplitude
+        js = [k for k in (req.mode_levels[i] or ()) if lv.label[k] == req.mode_label[i]]
+        if js and np.all(np.isfinite(level_hz[js])):
+            w2 = lv.weight[js]
+            f_pred[i] = float(np.sum(w2 * level_hz[js]) / np.sum(w2))
+    err = nonlinear.FORWARD_MODEL_ERROR
+    return Forward(f_pred, level_hz, err * np.nan_to_num(f_pred), err * np.nan_to_num(level_hz))
+
+
+def forward(req) -> Forward:
+    """The prediction of every measured mode and force level.
+
+    With force levels measured by :func:`guidefit.nonlinear.measure_levels`
+    (runs that differ only in hit force), the simulated forward model
+    (:func:`simulated_forward`); otherwise the describing-function model of
+    the module docstring (identify's within-run force bins, below lift-off
+    where it is accurate). A mode whose FRF came from hits with force levels
+    is predicted as the H1 (sum F^2) weighted mean of its levels'
+    predictions; one without at small amplitude.
+    """
+    from guidefit import nonlinear
+
+    measured = nonlinear.registered_levels(req.levels) if req.levels.size else None
+    if measured is not None:
+        return simulated_forward(req, measured)
     p = req.parameters["preload_factor"]
     sol, spec, lv = req.solution, req.spec, req.levels
     fm = sol.frequencies_hz
@@ -275,6 +314,18 @@ def variants(ctx) -> list[Variant]:
                     (log_free("preload_factor", "1", 0.01, 10.0, (0.03, 0.1, 0.2, 0.35, 0.5, 0.7, 1.0, 2.0, 5.0)),))]
 
 
+def prepare(identification, modes, levels, notes):
+    """Force levels across runs that differ only in hit force (:func:`guidefit.nonlinear.prepare_for_explain`):
+    measured with the level estimator of the forward model, the harder runs' modes entering through them."""
+    from guidefit import nonlinear
+    from guidefit.errors import RecordingError
+
+    try:
+        return nonlinear.prepare_for_explain(identification, modes, levels, notes)
+    except OSError as exc:  # the recording moved or vanished since identify read it
+        raise RecordingError(f"{identification.file}: cannot be read again for its force levels ({exc})") from None
+
+
 EFFECT = EffectDef(
     name="amplitude_dependence",
     meaning="nonlinear preloaded Hertz contacts: stiffness falls as hits unload the rows",
@@ -289,5 +340,6 @@ EFFECT = EffectDef(
     gate=gate,
     forward=forward,
     accept=accept,
+    prepare=prepare,
     nonlinear=True,
 )
