@@ -113,3 +113,17 @@ def test_explain_names_amplitude_dependence(identification, levels):
     pred = ForwardModel("MRB35", levels, n_hits=2).predict(p["value"])
     for lv, x in zip(levels, pred):
         assert abs(x.frequency_hz - lv.frequency_hz) < 2 * lv.sigma_hz()
+
+
+def test_harder_levels_are_fitted_apart_and_said(identification):
+    # the 1 kN and 5 kN runs move f_V (-0.3 %, -18 %): a shared-pole fit would average the levels, so
+    # identify fits the 100 N run alone, says why for each harder run, and keeps their hits and FRFs for
+    # explain's force-level model (identify._levels_agree)
+    runs = {r.name: r for r in identification.runs}
+    assert set(runs) == {"vertical_100N", "vertical_1000N", "vertical_5000N"}
+    said = [w for w in identification.warnings if "left out of the shared-pole fit" in w]
+    assert len(said) == 2 and all(("1000N" in w) != ("5000N" in w) for w in said)
+    assert runs["vertical_5000N"].modes == [] and runs["vertical_5000N"].hits
+    v = next(m for m in identification.modes if m.label == "vertical")
+    # the softest level: within the window/noise bias of the small-amplitude 3529.0 Hz, not pulled down
+    assert abs(v.frequency_hz / 3529.0 - 1) < 1e-3
