@@ -599,9 +599,13 @@ def report_cmd(recording, out_path, guide_name, candidates, estimator, no_jackkn
     _refuse([out_path], [recording, _guide_file(guide_name)])
     settings = _identify_settings(estimator, no_jackknife, fft_precision)
     with report.spinner("identifying and explaining") as progress:
-        write_report(recording, out_path, guide=guide_name, settings=settings,
-                     candidates=_candidate_names(candidates), progress=progress)
+        results = write_report(recording, out_path, guide=guide_name, settings=settings,
+                               candidates=_candidate_names(candidates), progress=progress)
     click.echo(f"report written to {out_path}")
+    gate = getattr(results.identification, "gate", None)
+    if gate:  # as identify: the report shows the modes, no joint parameters; exit 1
+        click.echo(f"guidefit: identification rejected: {recording}: {gate}", err=True)
+        sys.exit(1)
 
 
 @main.command(name="convert")

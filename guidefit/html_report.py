@@ -218,7 +218,10 @@ def _parameters_and_modes(res: ReportResults) -> list[str]:
     ident = res.identification
     rows = [[name, fmt(p["value"], p["unit"], significant_digits(p["value"], p["std"])), fmt(p["std"], p["unit"], 2)]
             for name, p in ident.parameters.items()]
-    parts = ["<h2>Joint parameters (Eq. 24-29, apparent)</h2>", _table(["parameter", "value", "std (1 sigma)"], rows),
+    gate = getattr(ident, "gate", None)
+    rejected = ([f"<p class='warn'><b>Identification rejected</b>: {_e(gate)}. No joint parameters are given; "
+                 "the modes found are listed below.</p>"] if gate else [])
+    parts = ["<h2>Joint parameters (Eq. 24-29, apparent)</h2>", *rejected, _table(["parameter", "value", "std (1 sigma)"], rows),
              "<p>f: undamped natural frequency |p|/2&pi; of the modal fit; zeta: viscous damping ratio after the "
              "exponential-window correction; K, c: Eq. (24)-(29) with the guide's mass (apparent single-DOF "
              "values: rig effects such as sensor mass or a soft support are in them; see the explanation).</p>",
@@ -449,21 +452,21 @@ def render_html(res: ReportResults) -> str:
     return "\n".join(parts)
 
 
-def write_report(path, out_path, guide=None, settings=None, candidates=None, progress=None) -> None:
+def write_report(path, out_path, guide=None, settings=None, candidates=None, progress=None) -> ReportResults:
     """Identify and explain one recording (:func:`report_results`) and write the HTML report whole.
 
     Never onto an input (the recording, a guide TOML): :class:`guidefit.outputs.OutputError`
     before any work. The file is written to a temporary file and renamed when complete
-    (:func:`guidefit.outputs.write_text`).
+    (:func:`guidefit.outputs.write_text`). Returns the results it rendered.
     """
     import os
 
     from guidefit.outputs import refuse_inputs, write_text
 
     refuse_inputs([out_path], [path, guide if isinstance(guide, (str, os.PathLike)) else None])
-    text = render_html(report_results(path, guide=guide, settings=settings, candidates=candidates,
-                                      progress=progress))
-    write_text(out_path, text)
+    results = report_results(path, guide=guide, settings=settings, candidates=candidates, progress=progress)
+    write_text(out_path, render_html(results))
+    return results
 
 
 def loads_embedded(text: str) -> dict:

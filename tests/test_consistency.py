@@ -436,3 +436,14 @@ def test_plausibility_is_silent_for_rigid_sets_and_names_non_rigid_ones():
     why = cons.plausibility(modes, [], bent, model)
     assert why is not None and "not rigid-body motions" in why
     assert math.isfinite(cons.rigid_misfit(bent)[0][4])
+
+
+def test_gate_in_the_html_report_exit_1(real_recording, tmp_path):
+    # the report renders the same identification: the rejection line, no joint parameters, exit 1
+    out_path = tmp_path / "report.html"
+    out = CliRunner().invoke(main, ["report", str(real_recording), "-o", str(out_path), "--no-jackknife"])
+    assert out.exit_code == 1, out.output
+    lines = [line for line in out.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("guidefit: identification rejected: ")
+    html = out_path.read_text()
+    assert "Identification rejected" in html
