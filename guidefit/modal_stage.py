@@ -569,7 +569,8 @@ def _candidate_labels(extras) -> dict:
         for cand, _ in m.candidates:
             word = str(cand).split()[0]
             for lab in (("roll_low", "roll_high") if word == "roll" else (word,)):
-                told.setdefault(lab, []).append(m.frequency_hz)
+                if m.frequency_hz not in told.setdefault(lab, []):
+                    told[lab].append(m.frequency_hz)
     return told
 
 
