@@ -22,7 +22,11 @@ the labelled modes of one modal model with shared poles
    then, when every run's hit point is known, ``c_j = g_j . q`` with
    ``g_j`` the hit direction through the rigid-body map, which fixes the
    relative scale of motions seen by different runs and mass-normalises
-   ``q``).
+   ``q``). Motion the sensors of the exciting runs cannot see is not
+   fitted: q is the least-kinetic-energy completion of what they see
+   (:func:`observable_basis`); when they see only mixtures of two motions,
+   :func:`_resolve_groups` tests each motion's pure form against the
+   hit-point residues.
 4. **Labels** from the kinetic-energy shares of the assembled motion
    (:func:`guidefit.identify.label_modes`). A mode whose label the data
    cannot decide -- two energy groups nearly equal, or the deciding DOF not
