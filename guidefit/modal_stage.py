@@ -410,6 +410,9 @@ GROUP_NAME = {"v": "vertical", "theta": "pitch", "psi": "yaw", "u_phi": "roll"}
 MAX_CARRIAGE_ENERGY = 1.5
 #: relative residual of the modal constants a group hypothesis may leave (or twice the full fit's)
 HYPOTHESIS_RELRES = 0.15
+#: the best hypothesis decides only when it puts at least this share of the mode's energy in the carriage (the
+#: choice by carriage energy rests on the recording's scale: a force read 1000x high makes every share ~1e-3)
+MIN_DECIDING_ENERGY = 0.3
 
 
 def groups_separable(N: np.ndarray) -> bool:
@@ -441,8 +444,10 @@ def _resolve_groups(q, observed, scale, constants, sensors, drive, mass):
     that leaves a large residual, or needs more kinetic energy in the carriage
     than the mode has (``q^T M q`` above :data:`MAX_CARRIAGE_ENERGY`), is out.
     Of the rest the one with most carriage energy is taken; a second within
-    :data:`AMBIGUOUS_RATIO` of it leaves the label ambiguous (``unresolved``:
-    ``[(label, carriage energy), ...]``). Returns ``(q, observed, unresolved)``.
+    :data:`AMBIGUOUS_RATIO` of it, or a best one below :data:`MIN_DECIDING_ENERGY`
+    (a scale error makes every share small and the largest one says nothing),
+    leaves the label ambiguous (``unresolved``: ``((label, carriage energy), ...),
+    reason``). Returns ``(q, observed, unresolved)``.
     """
     runs = [r for r in constants if np.any(constants[r])]
     top = max((abs(s) for s in scale.values()), default=0.0) or 1.0
@@ -466,8 +471,14 @@ def _resolve_groups(q, observed, scale, constants, sensors, drive, mass):
     fits.sort(key=lambda t: -t[0])
     e1, g1, q1 = fits[0]
     unresolved = ()
-    if len(fits) > 1 and fits[1][0] >= AMBIGUOUS_RATIO * e1:
-        unresolved = ((GROUP_NAME[g1], e1), (GROUP_NAME[fits[1][1]], fits[1][0]))
+    if len(fits) > 1 and (fits[1][0] >= AMBIGUOUS_RATIO * e1 or e1 < MIN_DECIDING_ENERGY):
+        why = ("the sensors see only a mix of these motions and the hit-point residues fit both (carriage "
+               "energy q^T M q of each given)")
+        if e1 < MIN_DECIDING_ENERGY:
+            why = ("the sensors see only a mix of these motions and neither makes it a carriage mode at this "
+                   f"recording's scale (q^T M q below {MIN_DECIDING_ENERGY:g}: force or acceleration scale off, "
+                   "or not a carriage mode)")
+        unresolved = (((GROUP_NAME[g1], e1), (GROUP_NAME[fits[1][1]], fits[1][0])), why)
     return q1, np.ones(5, bool), unresolved
 
 
@@ -509,8 +520,7 @@ def _labelled(gf, candidates, per_run, frf_by_run, geometry, model, warnings, ba
         k, m, run = c["k"], c["mode"], c["primary"]
         amb, why = by_share.get(i), "a second mode of the same motion has nearly as much carriage energy"
         if amb is None and c.get("unresolved"):
-            amb, why = list(c["unresolved"]), ("the sensors see only a mix of these motions and the hit-point "
-                                               "residues fit both (carriage energy of each given)")
+            amb, why = list(c["unresolved"][0]), c["unresolved"][1]
         if amb is None and label != "extra":
             amb, why = _ambiguity(c["energy"], c["observed"], label, model.labels) or (None, "")
         frf = frf_by_run[run]

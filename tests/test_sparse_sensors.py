@@ -123,3 +123,27 @@ def test_points_a_b_only_label_all_five_modes_and_raise_no_gate(tmp_path):
     assert result.extra_modes == () and result.missing_modes == ()
     assert result.gate is None
     assert result.parameters["f_H"]["value"] == pytest.approx(truth["roll_low"]["frequency_hz"], rel=5e-4)
+
+
+def test_points_a_b_only_with_a_scale_error_leave_v_and_theta_ambiguous_not_swapped(tmp_path):
+    """The A/B choice between v and theta rests on the carriage energy q^T M q, i.e. on the recording's
+    scale. With the force read 1000x high every share is ~1e-3 and the largest would call the vertical mode
+    pitch; such modes are reported ambiguous instead, and no K_V is given."""
+    from dataclasses import replace
+
+    data, truth = simulate("MRB35", config=SimulationConfig(hits=3, record_s=0.02, sensors="AB"), seed=3)
+    runs = []
+    for run in data.runs:
+        d = np.array(run.data)
+        d[..., list(run.channel_names).index("force")] *= 1000.0
+        runs.append(replace(run, data=d))
+    path = tmp_path / "scaled.h5"
+    write_recording(path, replace(data, runs=tuple(runs)))
+    result = identify(path, settings=IdentifySettings(jackknife=False))
+    labels = {m.label for m in result.modes}
+    assert "vertical" not in labels and "pitch" not in labels
+    f_v = next(m["frequency_hz"] for m in truth["modes"] if m["label"] == "vertical")
+    (v,) = [m for m in result.extra_modes if abs(m.frequency_hz / f_v - 1) < 1e-3]
+    assert v.label == "ambiguous" and {c[0] for c in v.candidates} == {"vertical", "pitch"}
+    assert any("scale" in w and "label ambiguous" in w for w in result.warnings)
+    assert result.parameters["K_V"]["value"] is None
