@@ -22,7 +22,11 @@ the labelled modes of one modal model with shared poles
    then, when every run's hit point is known, ``c_j = g_j . q`` with
    ``g_j`` the hit direction through the rigid-body map, which fixes the
    relative scale of motions seen by different runs and mass-normalises
-   ``q``).
+   ``q``). Motion the sensors of the exciting runs cannot see is not
+   fitted: q is the least-kinetic-energy completion of what they see
+   (:func:`observable_basis`); when they see only mixtures of two motions,
+   :func:`_resolve_groups` tests each motion's pure form against the
+   hit-point residues.
 4. **Labels** from the kinetic-energy shares of the assembled motion
    (:func:`guidefit.identify.label_modes`). A mode whose label the data
    cannot decide -- two energy groups nearly equal, or the deciding DOF not
@@ -144,7 +148,8 @@ def _widen_to_peaks(frf_by_run: dict, f_lo: float, f_hi: float, settings) -> tup
     return new_lo, min(new_hi, hi_cap) if new_hi > f_hi else f_hi
 
 
-def assemble_motion(constants: dict, sensors: dict, drive: dict | None = None, iterations: int = 20):
+def assemble_motion(constants: dict, sensors: dict, drive: dict | None = None, iterations: int = 20,
+                    mass: np.ndarray | None = None):
     """Carriage motion q (5,) behind one mode's modal constants in every run.
 
     Parameters
@@ -154,6 +159,12 @@ def assemble_motion(constants: dict, sensors: dict, drive: dict | None = None, i
     drive : dict run -> (5,) hit-point row (hit direction . rigid-body map), optional
         When given for every run, ``c_j = drive_j . q`` and q is mass-normalised
         (``m_j = (S_j q)(drive_j . q)``); else each run has a free scale.
+    mass : (5, 5) carriage mass matrix, optional
+        When given, motion that the sensors of the runs exciting the mode cannot
+        see (the null space of their stacked sensor matrices) is not fitted: q
+        is the least-kinetic-energy motion that reproduces the readings
+        (:func:`observable_basis`). Without it a least-squares fit through the
+        hit-point rows would give that unseen motion an arbitrary size.
 
     Returns
     -------
@@ -164,35 +175,83 @@ def assemble_motion(constants: dict, sensors: dict, drive: dict | None = None, i
     runs = [r for r in constants if np.any(constants[r])]
     if not runs:
         return np.zeros(5), {r: 0.0 for r in constants}, np.zeros(5, bool)
+    basis = np.eye(5)
+    if mass is not None:
+        basis = observable_basis(np.vstack([sensors[r] for r in runs]), mass)
+    q, scale = _assemble_in(basis, constants, sensors, drive, runs, iterations)
+    top_scale = max(abs(s) for s in scale.values()) or 1.0
+    seen = [r for r in runs if abs(scale[r]) > 0.05 * top_scale]
+    if mass is not None and len(seen) < len(runs):  # the unseen motion of the runs that excite the mode
+        seen_basis = observable_basis(np.vstack([sensors[r] for r in seen]), mass)
+        if seen_basis.shape[1] < basis.shape[1]:
+            q, scale = _assemble_in(seen_basis, constants, sensors, drive, runs, iterations)
+    observed = observed_dofs(np.vstack([sensors[r] for r in seen]))
+    return q, {r: scale.get(r, 0.0) for r in constants}, observed
+
+
+def observed_dofs(S: np.ndarray) -> np.ndarray:
+    """bool (5,): the DOFs a sensor matrix determines on their own (no null-space component)."""
+    _, s, vt = np.linalg.svd(S)
+    null = vt[int(np.sum(s > 1e-8 * s[0])):] if s.size and s[0] > 0 else np.eye(5)
+    return np.abs(null).sum(axis=0) < 1e-6 if null.size else np.ones(5, bool)
+
+
+def null_space(S: np.ndarray) -> np.ndarray:
+    """(5, d) orthonormal basis of the carriage motions a sensor matrix does not see."""
+    _, s, vt = np.linalg.svd(np.atleast_2d(S), full_matrices=True)
+    rank = int(np.sum(s > 1e-8 * s[0])) if s.size and s[0] > 0 else 0
+    return vt[rank:].T
+
+
+def observable_basis(S: np.ndarray, mass: np.ndarray) -> np.ndarray:
+    """(5, r) basis of the least-kinetic-energy motions consistent with the readings of ``S``.
+
+    Any motion ``q`` splits into ``q_o + n`` with ``n`` in the null space N of
+    ``S``; ``n`` is unseen, and the completion with least kinetic energy
+    ``q^T M q`` is the one M-orthogonal to N (``N^T M q = 0``). With every DOF
+    seen this is the identity.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> S = np.array([[0.0, 1.0, -0.045, 0.0, 0.0]])  # one y sensor at z = 0.045 m: sees v - 0.045 theta
+    >>> B = observable_basis(S, np.diag([2.2, 2.2, 3.9e-3, 5.8e-3, 2.5e-3]))
+    >>> B.shape
+    (5, 1)
+    """
+    N = null_space(S)
+    if N.shape[1] == 0:
+        return np.eye(5)
+    return null_space(N.T @ mass)
+
+
+def _assemble_in(basis, constants, sensors, drive, runs, iterations):
+    """ALS (then the driven fit) of ``m_j = c_j S_j q`` with ``q = basis @ a``."""
+    Sb = {r: sensors[r] @ basis for r in runs}
     top = max(runs, key=lambda r: np.linalg.norm(constants[r]))
-    q = np.linalg.lstsq(sensors[top], constants[top], rcond=1e-8)[0]
+    a = np.linalg.lstsq(Sb[top], constants[top], rcond=1e-8)[0]
     scale = {r: 1.0 for r in runs}
     for _ in range(iterations):
         for r in runs:
-            y = sensors[r] @ q
+            y = Sb[r] @ a
             den = float(y @ y)
             scale[r] = float(y @ constants[r]) / den if den > 0 else 0.0
-        A = np.vstack([scale[r] * sensors[r] for r in runs])
+        A = np.vstack([scale[r] * Sb[r] for r in runs])
         b = np.concatenate([constants[r] for r in runs])
-        q_new = np.linalg.lstsq(A, b, rcond=1e-8)[0]
-        n = np.linalg.norm(q_new)
+        a_new = np.linalg.lstsq(A, b, rcond=1e-8)[0]
+        n = np.linalg.norm(a_new)
         if n == 0:
             break
-        q_new = q_new / n
-        done = np.linalg.norm(q_new - q / (np.linalg.norm(q) or 1.0)) < 1e-10
-        q = q_new
+        a_new = a_new / n
+        done = np.linalg.norm(a_new - a / (np.linalg.norm(a) or 1.0)) < 1e-10
+        a = a_new
         if done:
             break
     if drive and all(r in drive and drive[r] is not None for r in runs):
-        q = _driven_motion(q, constants, sensors, drive, runs)
-        scale = {r: float(np.asarray(drive[r]) @ q) for r in runs}
-    top_scale = max(abs(s) for s in scale.values()) or 1.0
-    seen = [r for r in runs if abs(scale[r]) > 0.05 * top_scale]
-    S = np.vstack([sensors[r] for r in seen])
-    _, s, vt = np.linalg.svd(S)
-    null = vt[int(np.sum(s > 1e-8 * s[0])):]
-    observed = np.abs(null).sum(axis=0) < 1e-6 if null.size else np.ones(5, bool)
-    return q, {r: scale.get(r, 0.0) for r in constants}, observed
+        db = {r: np.asarray(drive[r]) @ basis for r in runs}
+        a = _driven_motion(a, constants, Sb, db, runs)
+        scale = {r: float(db[r] @ a) for r in runs}
+    return basis @ a, scale
 
 
 def _driven_motion(q0, constants, sensors, drive, runs):
@@ -342,22 +401,110 @@ def identify_frfs(frf_by_run: dict, geometry: dict, guide, settings=None, warnin
     return _labelled(gf, candidates, per_run, frf_by_run, geometry, model, warnings, band)
 
 
+#: DOF indices (u, v, theta, psi, phi) of each kinetic-energy group
+GROUP_DOFS = {"v": (1,), "theta": (2,), "psi": (3,), "u_phi": (0, 4)}
+#: label named for a group in an ambiguity
+GROUP_NAME = {"v": "vertical", "theta": "pitch", "psi": "yaw", "u_phi": "roll"}
+#: a motion hypothesis whose mass-normalised carriage energy q^T M q exceeds this is impossible (the carriage
+#: cannot hold more than the mode's whole kinetic energy; the margin allows for calibration error)
+MAX_CARRIAGE_ENERGY = 1.5
+#: relative residual of the modal constants a group hypothesis may leave (or twice the full fit's)
+HYPOTHESIS_RELRES = 0.15
+#: the best hypothesis decides only when it puts at least this share of the mode's energy in the carriage (the
+#: choice by carriage energy rests on the recording's scale: a force read 1000x high makes every share ~1e-3)
+MIN_DECIDING_ENERGY = 0.3
+
+
+def groups_separable(N: np.ndarray) -> bool:
+    """Whether a null space (5, d) is the sum of its parts within each energy group, i.e. every unseen
+    motion lies inside one group and the seen motion decides the group."""
+    d = N.shape[1]
+    if d == 0:
+        return True
+    inside = 0
+    for dofs in GROUP_DOFS.values():
+        other = [i for i in range(5) if i not in dofs]
+        inside += d - np.linalg.matrix_rank(N[other, :], tol=1e-8)
+    return inside == d
+
+
+def _relres(q, constants, sensors, drive, runs) -> float:
+    num = sum(float(np.sum((constants[r] - (sensors[r] @ q) * float(np.asarray(drive[r]) @ q)) ** 2)) for r in runs)
+    den = sum(float(np.sum(constants[r] ** 2)) for r in runs) or 1.0
+    return math.sqrt(num / den)
+
+
+def _resolve_groups(q, observed, scale, constants, sensors, drive, mass):
+    """Which carriage motion a mode is when the sensors see only mixtures of two groups' DOFs.
+
+    Points A and B alone (same z) read ``v - z theta`` and ``u + z psi``: the
+    least-energy motion splits a vertical mode between v and theta. Each
+    group's pure motion is then fitted to the modal constants of all runs
+    (sensor readings times hit-point motion, mass-normalised); a hypothesis
+    that leaves a large residual, or needs more kinetic energy in the carriage
+    than the mode has (``q^T M q`` above :data:`MAX_CARRIAGE_ENERGY`), is out.
+    Of the rest the one with most carriage energy is taken; a second within
+    :data:`AMBIGUOUS_RATIO` of it, or a best one below :data:`MIN_DECIDING_ENERGY`
+    (a scale error makes every share small and the largest one says nothing),
+    leaves the label ambiguous (``unresolved``: ``((label, carriage energy), ...),
+    reason``). Returns ``(q, observed, unresolved)``.
+    """
+    runs = [r for r in constants if np.any(constants[r])]
+    top = max((abs(s) for s in scale.values()), default=0.0) or 1.0
+    seen = [r for r in runs if abs(scale.get(r, 0.0)) > 0.05 * top]
+    if not seen:
+        return q, observed, ()
+    S = np.vstack([sensors[r] for r in seen])
+    if groups_separable(null_space(S)):
+        return q, observed, ()
+    base = _relres(q, constants, sensors, drive, runs)
+    fits = []
+    for g, dofs in GROUP_DOFS.items():
+        if np.linalg.matrix_rank(S[:, dofs], tol=1e-8) < len(dofs):
+            continue  # the group's own DOFs are not told apart: no test of it
+        qg, _ = _assemble_in(np.eye(5)[:, dofs], constants, sensors, drive, runs, 20)
+        rel, energy = _relres(qg, constants, sensors, drive, runs), float(qg @ mass @ qg)
+        if rel <= max(HYPOTHESIS_RELRES, 2.0 * base) and energy <= MAX_CARRIAGE_ENERGY:
+            fits.append((energy, g, qg))
+    if not fits:
+        return q, observed, ()
+    fits.sort(key=lambda t: -t[0])
+    e1, g1, q1 = fits[0]
+    unresolved = ()
+    if len(fits) > 1 and (fits[1][0] >= AMBIGUOUS_RATIO * e1 or e1 < MIN_DECIDING_ENERGY):
+        why = ("the sensors see only a mix of these motions and the hit-point residues fit both (carriage "
+               "energy q^T M q of each given)")
+        if e1 < MIN_DECIDING_ENERGY:
+            why = ("the sensors see only a mix of these motions and neither makes it a carriage mode at this "
+                   f"recording's scale (q^T M q below {MIN_DECIDING_ENERGY:g}: force or acceleration scale off, "
+                   "or not a carriage mode)")
+        unresolved = (((GROUP_NAME[g1], e1), (GROUP_NAME[fits[1][1]], fits[1][0])), why)
+    return q1, np.ones(5, bool), unresolved
+
+
 def _candidate(gf, k, sensors, drive, mass) -> dict:
     from guidefit.modeshapes import energy_shares, real_shape
 
     m = gf.modes[k]
     mc = real_shape(m.modal_constants)  # one phase for all runs
     constants = {r: mc[sl] for r, sl in gf.runs.items()}
-    q, scale, observed = assemble_motion(constants, sensors, drive)
+    driven = all(d is not None for d in drive.values())
+    # the driven fit reaches motion the sensors cannot see through the hit-point rows: keep it to the
+    # least-energy completion of what they do see (the non-driven path keeps its per-DOF rules)
+    q, scale, observed = assemble_motion(constants, sensors, drive, mass=mass if driven else None)
+    unresolved = ()
+    if driven:
+        q, observed, unresolved = _resolve_groups(q, observed, scale, constants, sensors, drive, mass)
     norm = np.linalg.norm(q) or 1.0
     qn = q / norm
     contrib = np.abs(qn * (mass @ qn))
     amps = {r: float(np.linalg.norm(c)) for r, c in constants.items()}
     primary = max(amps, key=amps.get)
-    carriage = float(q @ mass @ q) if all(d is not None for d in drive.values()) else None
+    carriage = float(q @ mass @ q) if driven else None
     return {"k": k, "mode": m, "carriage_energy": carriage, "frequency_hz": m.frequency_hz, "damping_ratio": m.damping_ratio, "q": qn,
             "q_raw": q, "energy": energy_shares(qn, mass), "u_energy": contrib[0], "phi_energy": contrib[4],
-            "shape": mc, "constants": constants, "primary": primary, "observed": observed, "scale": scale}
+            "shape": mc, "constants": constants, "primary": primary, "observed": observed, "scale": scale,
+            "unresolved": unresolved}
 
 
 def _labelled(gf, candidates, per_run, frf_by_run, geometry, model, warnings, band) -> ModalResult:
@@ -372,6 +519,8 @@ def _labelled(gf, candidates, per_run, frf_by_run, geometry, model, warnings, ba
     for i, (c, label) in enumerate(zip(candidates, labels)):
         k, m, run = c["k"], c["mode"], c["primary"]
         amb, why = by_share.get(i), "a second mode of the same motion has nearly as much carriage energy"
+        if amb is None and c.get("unresolved"):
+            amb, why = list(c["unresolved"][0]), c["unresolved"][1]
         if amb is None and label != "extra":
             amb, why = _ambiguity(c["energy"], c["observed"], label, model.labels) or (None, "")
         frf = frf_by_run[run]
@@ -412,10 +561,31 @@ def _labelled(gf, candidates, per_run, frf_by_run, geometry, model, warnings, ba
             modes.append(entry)
     found = {m.label for m in modes}
     missing = [lab for lab in model.labels if lab not in found and not lab.startswith("support")]
+    told = _candidate_labels(extras)
     for lab in missing:
-        warnings.append(f"model mode '{lab}' ({model.frequency_hz(lab):.0f} Hz) not observed in any run")
+        if lab in told:
+            warnings.append(f"model mode '{lab}' ({model.frequency_hz(lab):.0f} Hz) not told apart: a candidate of "
+                            f"the ambiguous mode(s) at {', '.join(f'{f:.0f}' for f in told[lab])} Hz")
+        else:
+            warnings.append(f"model mode '{lab}' ({model.frequency_hz(lab):.0f} Hz) not observed in any run")
+    missing = [lab for lab in missing if lab not in told]
     return ModalResult(sorted(modes, key=lambda m: m.frequency_hz), sorted(extras, key=lambda m: m.frequency_hz),
                        missing, gf, per_run, band)
+
+
+def _candidate_labels(extras) -> dict:
+    """label -> frequencies of the ambiguous modes that name it as a candidate (found, but not told apart:
+    not missing). A candidate "roll" names both roll modes; "vertical at 3529 Hz" names vertical."""
+    told: dict = {}
+    for m in extras:
+        if m.label != "ambiguous":
+            continue
+        for cand, _ in m.candidates:
+            word = str(cand).split()[0]
+            for lab in (("roll_low", "roll_high") if word == "roll" else (word,)):
+                if m.frequency_hz not in told.setdefault(lab, []):
+                    told[lab].append(m.frequency_hz)
+    return told
 
 
 #: fewer FRF bins than this in the band: no mode fit is attempted
