@@ -31,8 +31,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-import _common as C  # noqa: E402
-import bench_frf as F  # noqa: E402
+import _common as C
+import bench_frf as F
 
 SCRIPT = Path(__file__).resolve()
 
@@ -70,7 +70,7 @@ def main() -> None:
     if args.worker:
         name, path = args.worker
         F.w_imports(path)
-        import guidefit.globalfit  # noqa: F401
+        import guidefit.globalfit
         import guidefit.identify  # noqa: F401
 
         cpu0 = C.cpu_times()

@@ -56,7 +56,7 @@ def test_unseen_motion_gets_no_energy_with_y_only_sensors(nominal):
     phi, drive, mass = nominal
     S = _sensors("ABCD", "y")
     constants = _constants(phi["vertical"], S, drive)
-    q, scale, observed = ms.assemble_motion(constants, {r: S for r in drive}, drive, mass=mass)
+    q, _scale, observed = ms.assemble_motion(constants, {r: S for r in drive}, drive, mass=mass)
     assert list(observed) == [False, True, True, False, True]
     assert abs(q[0]) < 1e-6 and abs(q[3]) < 1e-6
     assert float(q @ mass @ q) == pytest.approx(1.0, rel=0.01)

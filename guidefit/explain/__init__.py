@@ -43,18 +43,8 @@ function frequency (below).
 
 Pairing
 -------
-Measured modes are paired with model modes by the Hungarian method
-(:func:`scipy.optimize.linear_sum_assignment`), separately per run, with the
-cost ``10 |ln(f_i / f_j)| + label + 5 (1 - MAC)``. The label term is
-``10 (1 - share)``, ``share`` the model mode's kinetic-energy share (carriage
-only) of the motion the measured label names (v for ``vertical``, theta for
-``pitch``, psi for ``yaw``, u+phi for the roll modes), plus 3 between
-``roll_low`` and ``roll_high``. A labelled mode may so pair with a mode far
-off in frequency (the paper's f_H = 1075 Hz pairs with the model's roll_low at
-2496 Hz), while an unlabelled one (``extra``) pairs only within about 35 %
-(dummy cost 3; labelled 20). Model modes left over are "not observed" and
-carry no residual. The pairing is redone at every model evaluation, since an
-effect may reorder modes.
+Measured modes are paired with model modes by the Hungarian method, per run,
+at every model evaluation (:mod:`guidefit.explain.pairing` gives the cost).
 
 Stages
 ------

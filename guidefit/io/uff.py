@@ -745,24 +745,25 @@ def uff_function_types(display: str) -> list[int]:
     RecordingError
         pyuff missing, or not a readable UFF file.
     """
-    pyuff = _pyuff(display)
-    try:
-        uff = pyuff.UFF(display)
-        kinds = [int(k) for k in uff.get_set_types()]
-    except Exception as exc:  # noqa: BLE001 - pyuff raises bare Exception
-        raise RecordingError(f"{display}: not a readable UFF file ({_first_line(exc)})") from None
+    uff, kinds = open_uff(display)
     return [int(_read_set(uff, i, 58, display, header_only=True).get("func_type", -1))
             for i, kind in enumerate(kinds, start=1) if kind == 58]
 
 
-def _sets_of(display: str) -> list[tuple[int, dict]]:
-    """The time datasets of a UFF file as (1-based set number, dataset dict)."""
+def open_uff(display: str):
+    """``(pyuff.UFF, dataset types)`` of a UFF file; a file pyuff cannot read is one-line RecordingError."""
     pyuff = _pyuff(display)
     try:
         uff = pyuff.UFF(display)
         kinds = [int(k) for k in uff.get_set_types()]
     except Exception as exc:  # noqa: BLE001 - pyuff raises bare Exception
         raise RecordingError(f"{display}: not a readable UFF file ({_first_line(exc)})") from None
+    return uff, kinds
+
+
+def _sets_of(display: str) -> list[tuple[int, dict]]:
+    """The time datasets of a UFF file as (1-based set number, dataset dict)."""
+    uff, kinds = open_uff(display)
     if not kinds:
         raise RecordingError(
             f"{display}: no UFF datasets (blocks between '    -1' lines); expected UFF-58 time data or FRFs"

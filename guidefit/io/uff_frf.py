@@ -72,11 +72,10 @@ from guidefit.io.uff import (
     _derived_channel,
     _describe,
     _direction_label,
-    _first_line,
     _provenance_of,
-    _pyuff,
     _read_set,
     direction_vector,
+    open_uff,
 )
 
 __all__ = ["read_uff_frfs"]
@@ -177,12 +176,7 @@ def _nodes(dset: dict) -> dict[int, np.ndarray]:
 
 def _scan(display: str) -> tuple[list, list, dict]:
     """(FRF records, coherence records, node coordinates) of a UFF file."""
-    pyuff = _pyuff(display)
-    try:
-        uff = pyuff.UFF(display)
-        kinds = [int(k) for k in uff.get_set_types()]
-    except Exception as exc:  # noqa: BLE001 - pyuff raises bare Exception
-        raise RecordingError(f"{display}: not a readable UFF file ({_first_line(exc)})") from None
+    uff, kinds = open_uff(display)
     if not kinds:
         raise RecordingError(f"{display}: no UFF datasets (blocks between '    -1' lines); expected UFF-58 FRFs")
     if _count_delimiters(Path(display).read_bytes()) % 2:
