@@ -400,8 +400,9 @@ def _in_band(frf, lo: float, hi: float):
 
 
 class _Shared:
-    """Variable-projection problem of one band: FRF columns in groups (runs), each group's poles shifted
-    by its exponential window (``p - 1/tau``), residues and residual terms per column (internal)."""
+    """Variable-projection problem of one band: FRF columns in groups (runs), each group's basis evaluated
+    at ``s + 1/tau`` of its exponential window (the windowed FRF is ``H(s + 1/tau)``), residues and residual
+    terms per column (internal)."""
 
     def __init__(self, f, H, groups, shifts, terms=None, scale=None):
         from guidefit import modes as modes_mod
