@@ -376,6 +376,14 @@ def identify_frfs(frf_by_run: dict, geometry: dict, guide, settings=None, warnin
     from guidefit import globalfit
     from guidefit.model import vibration as vib
 
+    with globalfit.one_blas_thread():  # small matrices only: see globalfit.one_blas_thread
+        return _identify_frfs(frf_by_run, geometry, guide, settings, warnings, model)
+
+
+def _identify_frfs(frf_by_run, geometry, guide, settings, warnings, model) -> ModalResult:
+    from guidefit import globalfit
+    from guidefit.model import vibration as vib
+
     settings = settings or _DefaultSettings()
     warnings = warnings if warnings is not None else []
     spec = vib.model_from_guide(guide)
