@@ -232,3 +232,18 @@ def test_modal_stage_starts_from_frf_sets(recorded):
     assert len(res.fit.diagram.orders) > 0 and res.fit.selection.chosen
     for m in res.modes:
         assert set(m.std_parts) == {"fit", "jackknife", "selection"}
+
+
+def test_modal_stage_runs_with_one_blas_thread_and_restores_the_setting():
+    """The small matrices of the global fit gain nothing from BLAS threads and lose much on a busy
+    machine: inside ``one_blas_thread`` every BLAS library reports one thread, after it the setting
+    it had before."""
+    threadpoolctl = pytest.importorskip("threadpoolctl")
+    before = [p["num_threads"] for p in threadpoolctl.threadpool_info() if p["user_api"] == "blas"]
+    if not before:
+        pytest.skip("no BLAS library loaded that threadpoolctl can see")
+    with globalfit.one_blas_thread():
+        inside = [p["num_threads"] for p in threadpoolctl.threadpool_info() if p["user_api"] == "blas"]
+    after = [p["num_threads"] for p in threadpoolctl.threadpool_info() if p["user_api"] == "blas"]
+    assert inside == [1] * len(before)
+    assert after == before
