@@ -55,6 +55,7 @@ Examples
 
 from __future__ import annotations
 
+import contextlib
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -129,6 +130,22 @@ class PoleSelection:
 
     chosen: list
     rejected: list
+
+
+def one_blas_thread():
+    """Context manager limiting BLAS to one thread (threadpoolctl; a no-op without it).
+
+    Every matrix of the modal stage is small (a few thousand rows, tens of
+    columns): a second BLAS thread cannot speed it up, and on a loaded
+    machine each call waits for that thread to be scheduled. On the 20-hit,
+    0.5 s benchmark recording (bench_identify_e2e.py) this made the global
+    fit 7x slower (1.9 s against 0.26 s); the results are the same.
+    """
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # pragma: no cover - threadpoolctl is a dependency
+        return contextlib.nullcontext()
+    return threadpool_limits(limits=1, user_api="blas")
 
 
 def _mac(a: np.ndarray, b: np.ndarray) -> float:
@@ -795,6 +812,11 @@ def global_fit(frf_by_run: dict, band_hz: tuple, *, orders: Sequence[int] = rang
     guidefit.errors.IdentificationError
         When the band holds too few bins or no stable pole.
     """
+    with one_blas_thread():
+        return _global_fit(frf_by_run, band_hz, orders, jackknife, selection_spread, weighting)
+
+
+def _global_fit(frf_by_run, band_hz, orders, jackknife, selection_spread, weighting) -> GlobalFit:
     if not frf_by_run:
         raise IdentificationError("global fit: no run gave an FRF")
     groups: dict[tuple, list] = {}
@@ -860,6 +882,11 @@ def run_estimates(gf: GlobalFit, frf_by_run: dict, min_share: float = 0.01) -> d
     constant over the runs or where its refit drifts from the global pole
     (by more than ``zeta f`` in frequency).
     """
+    with one_blas_thread():
+        return _run_estimates(gf, frf_by_run, min_share)
+
+
+def _run_estimates(gf: GlobalFit, frf_by_run: dict, min_share: float) -> dict:
     out: dict = {}
     lo, hi = gf.band_hz
     amps = {run: np.array([np.linalg.norm(np.asarray(m.modal_constants)[sl]) for m in gf.modes])

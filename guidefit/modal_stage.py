@@ -374,6 +374,13 @@ def identify_frfs(frf_by_run: dict, geometry: dict, guide, settings=None, warnin
         When no stable mode is found in the band.
     """
     from guidefit import globalfit
+
+    with globalfit.one_blas_thread():  # small matrices only: see globalfit.one_blas_thread
+        return _identify_frfs(frf_by_run, geometry, guide, settings, warnings, model)
+
+
+def _identify_frfs(frf_by_run, geometry, guide, settings, warnings, model) -> ModalResult:
+    from guidefit import globalfit
     from guidefit.model import vibration as vib
 
     settings = settings or _DefaultSettings()

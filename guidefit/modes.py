@@ -350,6 +350,7 @@ def prominent_peaks(y, min_prominence: float) -> tuple[np.ndarray, np.ndarray]:
     n = y.size
     if n < 3:
         return np.zeros(0, dtype=int), np.zeros(0)
+    y_arr, y = y, y.tolist()  # python floats for the walks below (one sample at a time)
     # candidate maxima, plateaus reduced to their middle sample (as scipy's _local_maxima_1d)
     peaks = []
     i = 1
@@ -364,7 +365,7 @@ def prominent_peaks(y, min_prominence: float) -> tuple[np.ndarray, np.ndarray]:
         i += 1
     idx = np.array(peaks, dtype=int)
     prom = np.empty(idx.size)
-    for k, p in enumerate(idx):
+    for k, p in enumerate(peaks):
         # walk out to the nearest strictly higher sample (or the edge); the base is the minimum on the way
         left = p
         while left > 0 and y[left - 1] <= y[p]:
@@ -372,7 +373,7 @@ def prominent_peaks(y, min_prominence: float) -> tuple[np.ndarray, np.ndarray]:
         right = p
         while right < n - 1 and y[right + 1] <= y[p]:
             right += 1
-        prom[k] = y[p] - max(y[left:p + 1].min(), y[p:right + 1].min())
+        prom[k] = y[p] - max(y_arr[left:p + 1].min(), y_arr[p:right + 1].min())
     keep = prom >= min_prominence
     return idx[keep], prom[keep]
 

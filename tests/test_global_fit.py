@@ -252,3 +252,18 @@ def test_exponential_window_is_modelled_exactly_on_a_simulated_recording(recorde
         m = min(gf.modes, key=lambda m: abs(m.frequency_hz - t["frequency_hz"]))
         assert abs(m.frequency_hz / t["frequency_hz"] - 1) < 1e-5, (t, m)
         assert abs(m.damping_ratio / t["damping_ratio"] - 1) < 1e-4, (t, m)
+
+
+def test_modal_stage_runs_with_one_blas_thread_and_restores_the_setting():
+    """The small matrices of the global fit gain nothing from BLAS threads and lose much on a busy
+    machine: inside ``one_blas_thread`` every BLAS library reports one thread, after it the setting
+    it had before."""
+    threadpoolctl = pytest.importorskip("threadpoolctl")
+    before = [p["num_threads"] for p in threadpoolctl.threadpool_info() if p["user_api"] == "blas"]
+    if not before:
+        pytest.skip("no BLAS library loaded that threadpoolctl can see")
+    with globalfit.one_blas_thread():
+        inside = [p["num_threads"] for p in threadpoolctl.threadpool_info() if p["user_api"] == "blas"]
+    after = [p["num_threads"] for p in threadpoolctl.threadpool_info() if p["user_api"] == "blas"]
+    assert inside == [1] * len(before)
+    assert after == before
