@@ -59,7 +59,9 @@ def variants(ctx) -> list[Variant]:
             lo, hi = (lo + 1 if a > 0 else lo), hi  # adjoining segments do not share a roller
             for f in (0.05, 0.3, 0.7):
                 starts.append((float(lo), float(hi), f))
-    return [Variant("row_segment", f"row {r}", {"row": r}, (first, last, factor), tuple(starts)) for r in (1, 2, 3, 4)]
+    n_ends = n * (n + 1) // 2  # whole-roller segments first <= last: the discrete choices of one row
+    return [Variant("row_segment", f"row {r}", {"row": r}, (first, last, factor), tuple(starts),
+                    whole=("first", "last"), choices=n_ends) for r in (1, 2, 3, 4)]
 
 
 def ambiguity(tags) -> str | None:
