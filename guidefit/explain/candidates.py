@@ -272,6 +272,8 @@ def profile_whole(ctx, data, fit_: CandidateFit, rounds: int = 4) -> CandidateFi
         centre = list(best_combo)
     best, keep = valid[best_combo]
     w = {c: math.exp(-0.5 * (r[0].chi2 - best.chi2)) for c, r in valid.items()}
+    w = {c: x for c, x in w.items() if x > 1e-9}  # combinations the data rule out (and their inf stds) drop
+    valid = {c: valid[c] for c in w}
     total = sum(w.values())
     values, std = [0.0] * len(free), [0.0] * len(free)
     for i, c in zip(whole_pos, best_combo):
