@@ -2,8 +2,9 @@
 
 ``guidefit simulate`` (MRB35, 4 hits per run, 0.05 s) with
 ``row_segment:row=R,first=F,last=L,factor=0.3`` -> :func:`guidefit.explain.explain`;
-per case: verdict, row found, ends, factor and its std, pass (row right, ends
-within two rollers, factor within 10 %). Run from the repository root::
+per case: verdict, row found, ends, factor and its std, the factor's error in
+standard deviations, pass (row right, ends within two rollers, factor within
+10 %; an ``unexplained`` verdict reports the best attempt and fails). Run from the repository root::
 
     python benchmarks/segment_recordings.py --seeds 2
     python benchmarks/segment_recordings.py --rows 3 --halves low
@@ -56,7 +57,8 @@ def main() -> int:
     ap.add_argument("--halves", nargs="*", default=["low"], choices=list(HALVES))
     args = ap.parse_args()
     rows = []
-    print("| truth | seed | verdict | row | first | last | factor | pass | CPU |\n|---|---|---|---|---|---|---|---|---|")
+    print("| truth | seed | verdict | row | first | last | factor | error/std | pass | CPU |\n"
+          "|---|---|---|---|---|---|---|---|---|---|")
     with tempfile.TemporaryDirectory() as tmp:
         for seed in range(args.seeds):
             for row in args.rows:
@@ -65,11 +67,12 @@ def main() -> int:
                     r = run(row, first, last, seed, Path(tmp))
                     rows.append(r)
                     if "factor" in r:
-                        std = f" +/- {r['factor_std']:.3f}" if r.get("factor_std") else ""
+                        std = f" +/- {r['factor_std']:.4f}" if r.get("factor_std") else ""
+                        z = abs(r["factor"] - 0.3) / r["factor_std"] if r.get("factor_std") else float("nan")
                         body = (f"{r['found_row']} | {r['found_first']:.2f} | {r['found_last']:.2f} | "
-                                f"{r['factor']:.3f}{std}")
+                                f"{r['factor']:.4f}{std} | {z:.1f}")
                     else:
-                        body = "- | - | - | -"
+                        body = "- | - | - | - | -"
                     extra = f" (+ {', '.join(r['others'])})" if r["others"] else ""
                     print(f"| row {row}, {first}-{last}, 0.3 | {seed} | {r['verdict']}{extra} | {body} | "
                           f"{'pass' if r['pass'] else 'FAIL'} | {r['cpu_s']:.0f} s |", flush=True)
