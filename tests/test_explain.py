@@ -243,6 +243,19 @@ def test_half_a_row_factor_within_10_percent_where_fractional_ends_traded_it_off
     assert abs(p["factor"]["value"] - 0.3) <= 3 * p["factor"]["std"]
 
 
+def test_row_segment_ending_inside_a_roller_keeps_fractional_ends():
+    """Last end 10.5 (roller 11 half on the damage): the whole-roller fits misfit (2-9 at 0.09 plus a corner
+    mass was "explained" without the fallback); the continuous fit stands, its ends counted as parameters."""
+    result = run([("row_segment", {"row": 2, "first": 1, "last": 10.5, "factor": 0.3})])
+    assert result.verdict == "explained", result.notes
+    assert [e["name"] for e in result.effects] == ["row_segment"]
+    p = result.effects[0]["parameters"]
+    assert p["row"]["value"] == 2 and abs(p["last"]["value"] - 10.5) < 0.5
+    assert p["factor"]["value"] == pytest.approx(0.3, rel=0.10)
+    segment = next(c for c in result.candidates if c["variant"] == "row_segment (row 2)")
+    assert segment["n_params"] == 3 and segment["n_choices"] == 4
+
+
 def test_row_segment_at_the_other_end():
     """Rollers 12-21 of row 3 (continuous ends gave 12.9-20.4 and a factor of 0.18 +/- 0.075 here)."""
     truth = {"row": 3, "first": 12, "last": 21, "factor": 0.3}

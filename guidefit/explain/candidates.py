@@ -29,7 +29,7 @@ import numpy as np
 
 from guidefit.errors import ModelError
 from guidefit.explain.evaluation import Context, Evaluation, evaluate
-from guidefit.explain.settings import EQUAL_BIC, IDENTIFIABLE_LOG_STD, PAIR_PARTNER_VARIANTS
+from guidefit.explain.settings import EQUAL_BIC, IDENTIFIABLE_LOG_STD, PAIR_PARTNER_VARIANTS, WHOLE_MISFIT_CHI2
 from guidefit.model.effects import Variant
 
 
@@ -38,7 +38,9 @@ class CandidateFit:
     """A fitted combination of variants: parameter values (physical) with standard deviations.
 
     ``identifiable``/``at_bound`` per free parameter; ``ev`` the evaluation
-    at the fitted values; ``k`` the number of fitted parameters.
+    at the fitted values; ``k`` the number of fitted parameters;
+    ``profiled``: its whole-number parameters were profiled (they count as
+    discrete choices, :func:`profile_whole`), false when they stayed continuous.
     """
 
     variants: tuple
@@ -50,6 +52,7 @@ class CandidateFit:
     k: int
     identifiable: list
     at_bound: list
+    profiled: bool = False
 
 
 @dataclass(frozen=True)
@@ -247,7 +250,10 @@ def profile_whole(ctx, data, fit_: CandidateFit, rounds: int = 4) -> CandidateFi
     floor and ceiling (the window moved to the best one while that lies on
     its edge, up to ``rounds`` times) is fitted with the other parameters
     free; the lowest chi2 wins. Its whole parameters count as discrete
-    choices (``Variant.choices``), not fitted parameters (``k``). Standard
+    choices (``Variant.choices``), not fitted parameters (``k``). When the
+    best whole-number fit is worse than the continuous one by more than
+    ``WHOLE_MISFIT_CHI2`` the continuous fit is returned unchanged (its
+    whole parameters stay fitted parameters, not choices). Standard
     deviations are the spread over the combinations weighted by
     ``exp(-delta chi2 / 2)`` (each one's own std added in quadrature), so a
     segment whose ends the data do not pin down keeps a wide factor.
@@ -271,6 +277,8 @@ def profile_whole(ctx, data, fit_: CandidateFit, rounds: int = 4) -> CandidateFi
             break
         centre = list(best_combo)
     best, keep = valid[best_combo]
+    if best.chi2 - fit_.chi2 > WHOLE_MISFIT_CHI2:
+        return fit_  # the ends are not whole rollers: the continuous fit, its ends counted as parameters
     w = {c: math.exp(-0.5 * (r[0].chi2 - best.chi2)) for c, r in valid.items()}
     w = {c: x for c, x in w.items() if x > 1e-9}  # combinations the data rule out (and their inf stds) drop
     valid = {c: valid[c] for c in w}
@@ -297,7 +305,7 @@ def profile_whole(ctx, data, fit_: CandidateFit, rounds: int = 4) -> CandidateFi
             ident.append(bool(std[i] < 0.25 * (fr.upper - fr.lower)))
             at_bound.append(False)
     theta = np.array([fr.encode(x) for (_, fr), x in zip(free, values)])
-    return CandidateFit(fit_.variants, theta, values, std, best.chi2, best.ev, best.k, ident, at_bound)
+    return CandidateFit(fit_.variants, theta, values, std, best.chi2, best.ev, best.k, ident, at_bound, True)
 
 
 def reduced(fit_: CandidateFit, variants: list):
