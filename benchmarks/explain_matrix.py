@@ -210,13 +210,15 @@ def main() -> None:
     parser.add_argument("--json", help="also write the rows as JSON to this file")
     parser.add_argument("--seeds", type=int, default=1,
                         help="noise seeds per case; with more than one, print the share of expected outcomes")
+    parser.add_argument("--case", action="append", help="only cases whose name contains this (repeatable)")
     args = parser.parse_args()
     guide = load_guide("MRB35")
-    rows = [run_case(name, truth, options, guide) for name, truth, options in CASES]
+    cases = [c for c in CASES if not args.case or any(s.lower() in c[0].lower() for s in args.case)]
+    rows = [run_case(name, truth, options, guide) for name, truth, options in cases]
     print(markdown(rows))
     if args.seeds > 1:
         print("\n| case | expected outcome | seeds | as expected |\n|---|---|---|---|")
-        for name, truth, options in CASES:
+        for name, truth, options in cases:
             ok = 0
             for seed in range(args.seeds):
                 r = run_case(name, truth, options, guide, seed)

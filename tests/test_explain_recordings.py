@@ -83,11 +83,11 @@ def test_null_recording_is_adequate_with_no_effect(null_result):
 def test_half_a_row_at_30_percent_on_a_recording(folder):
     """``guidefit simulate --effect row_segment:row=3,first=1,last=11,factor=0.3`` -> identify -> explain.
 
-    The row is right and both ends within two rollers. The factor trades off
-    against the segment's extent in these data (identify's shapes carry the
-    2 % floor): it is within three of its standard deviations, which are
-    about 35 % here (0.1 % frequency noise and 1 % shape noise give 10 %,
-    tests/test_explain.py).
+    Issue 16's target: the row right, both ends within two rollers and the
+    factor within 10 %. With the global modal fit's frequencies and shapes
+    the fit lands within 1 % of the truth on every row and both halves
+    (benchmarks/segment_recordings.py, 3 seeds); the stated standard
+    deviation of the factor must cover the error as well.
     """
     path = _simulate(folder, "segment", [("row_segment", {"row": 3, "first": 1, "last": 11, "factor": 0.3})], seed=0)
     result = explain(path)
@@ -96,8 +96,22 @@ def test_half_a_row_at_30_percent_on_a_recording(folder):
     p = result.effects[0]["parameters"]
     assert p["row"]["value"] == 3
     assert abs(p["first"]["value"] - 1) <= 2 and abs(p["last"]["value"] - 11) <= 2
+    assert p["factor"]["value"] == pytest.approx(0.3, rel=0.10)
     assert abs(p["factor"]["value"] - 0.3) <= 3 * p["factor"]["std"]
     assert result.error_after["rms_frequency_error_pct"] < result.error_before["rms_frequency_error_pct"] / 5
+
+
+def test_half_of_row_1_at_30_percent_on_a_recording(folder):
+    """Row 1 (the loaded side, asymmetric carriage; was ``unexplained`` with the per-run identify)."""
+    path = _simulate(folder, "segment_row1", [("row_segment", {"row": 1, "first": 12, "last": 21, "factor": 0.3})],
+                     seed=2)
+    result = explain(path)
+    assert result.verdict == "explained", result.notes
+    assert [e["name"] for e in result.effects] == ["row_segment"]
+    p = result.effects[0]["parameters"]
+    assert p["row"]["value"] == 1
+    assert abs(p["first"]["value"] - 12) <= 2 and abs(p["last"]["value"] - 21) <= 2
+    assert p["factor"]["value"] == pytest.approx(0.3, rel=0.10)
 
 
 def test_paper_like_sample_explained_by_lateral_support_and_added_mass(paper_cli):

@@ -29,7 +29,7 @@ import numpy as np
 
 from guidefit.errors import ModelError
 from guidefit.explain.evaluation import Context, Evaluation, evaluate
-from guidefit.explain.settings import EQUAL_BIC, IDENTIFIABLE_LOG_STD, PAIR_PARTNER_VARIANTS
+from guidefit.explain.settings import EQUAL_BIC, IDENTIFIABLE_LOG_STD, PAIR_PARTNER_VARIANTS, WHOLE_MISFIT_CHI2
 from guidefit.model.effects import Variant
 
 
@@ -38,7 +38,9 @@ class CandidateFit:
     """A fitted combination of variants: parameter values (physical) with standard deviations.
 
     ``identifiable``/``at_bound`` per free parameter; ``ev`` the evaluation
-    at the fitted values; ``k`` the number of fitted parameters.
+    at the fitted values; ``k`` the number of fitted parameters;
+    ``profiled``: its whole-number parameters were profiled (they count as
+    discrete choices, :func:`profile_whole`), false when they stayed continuous.
     """
 
     variants: tuple
@@ -50,6 +52,7 @@ class CandidateFit:
     k: int
     identifiable: list
     at_bound: list
+    profiled: bool = False
 
 
 @dataclass(frozen=True)
@@ -164,8 +167,13 @@ def _std_in_fit_coordinates(jac: np.ndarray, chi2: float, dof: int, k: int) -> n
     return std_t
 
 
-def fit(ctx: Context, data, variants: tuple, starts: list, n_polish: int = 2, max_nfev: int = 60) -> CandidateFit:
-    """Least-squares fit of the free parameters of a combination of variants."""
+def fit(ctx: Context, data, variants: tuple, starts: list, n_polish: int = 2, max_nfev: int = 60,
+        profile: bool = True) -> CandidateFit:
+    """Least-squares fit of the free parameters of a combination of variants.
+
+    Parameters that a variant declares ``whole`` are then profiled over whole
+    numbers (:func:`profile_whole`) unless ``profile`` is false.
+    """
     from scipy.optimize import least_squares
 
     free = [fr for v in variants for fr in v.free]
@@ -201,7 +209,103 @@ def fit(ctx: Context, data, variants: tuple, starts: list, n_polish: int = 2, ma
             ident.append(bool(math.isfinite(st) and fr.scale * st < 0.25 * (fr.upper - fr.lower)))
         b0, b1 = fr.bounds
         at_bound.append(bool(not fr.bound_is_value and min(t - b0, b1 - t) < 1e-3 * (b1 - b0)))
-    return CandidateFit(tuple(variants), res.x, values, std, ev.chi2, ev, k, ident, at_bound)
+    out = CandidateFit(tuple(variants), res.x, values, std, ev.chi2, ev, k, ident, at_bound)
+    return profile_whole(ctx, data, out) if profile and any(v.whole for v in variants) else out
+
+
+def _whole_options(fr, x: float, centre: float | None = None) -> list:
+    """Whole numbers within one of floor/ceil of ``x`` (or of ``centre``), inside the parameter's bounds."""
+    c = x if centre is None else centre
+    lo, hi = max(math.ceil(fr.lower), math.floor(c) - 1), min(math.floor(fr.upper), math.ceil(c) + 1)
+    return list(range(int(lo), int(hi) + 1))
+
+
+def _fit_whole_combo(ctx, data, fit_: CandidateFit, whole_pos: list, combo: tuple):
+    """The combination with the whole parameters fixed at ``combo`` and the others refitted (None if invalid)."""
+    fixed_at = dict(zip(whole_pos, combo))
+    subs, start, pos = [], [], 0
+    for v in fit_.variants:
+        fixed, free = dict(v.fixed), []
+        for fr in v.free:
+            if pos in fixed_at:
+                fixed[fr.name] = float(fixed_at[pos])
+            else:
+                free.append(fr)
+                start.append(fit_.values[pos])
+            pos += 1
+        subs.append(Variant(v.effect, v.tag, fixed, tuple(free)))
+    keep = [i for i in range(pos) if i not in fixed_at]
+    grid = grid_starts(fit_.variants[0]) if len(fit_.variants) == 1 else []
+    starts = list(dict.fromkeys([tuple(start)] + [tuple(g[i] for i in keep) for g in grid]))
+    try:
+        return fit(ctx, data, tuple(subs), starts, n_polish=1, max_nfev=40, profile=False), keep
+    except ModelError:  # an impossible combination (a segment's first roller after its last)
+        return None, keep
+
+
+def profile_whole(ctx, data, fit_: CandidateFit, rounds: int = 4) -> CandidateFit:
+    """The continuous fit ``fit_`` with its ``whole`` parameters profiled over whole numbers.
+
+    Every whole-number combination within one of the continuous optimum's
+    floor and ceiling (the window moved to the best one while that lies on
+    its edge, up to ``rounds`` times) is fitted with the other parameters
+    free; the lowest chi2 wins. Its whole parameters count as discrete
+    choices (``Variant.choices``), not fitted parameters (``k``). When the
+    best whole-number fit is worse than the continuous one by more than
+    ``WHOLE_MISFIT_CHI2`` the continuous fit is returned unchanged (its
+    whole parameters stay fitted parameters, not choices). Standard
+    deviations are the spread over the combinations weighted by
+    ``exp(-delta chi2 / 2)`` (each one's own std added in quadrature), so a
+    segment whose ends the data do not pin down keeps a wide factor.
+    """
+    free = [(v, fr) for v in fit_.variants for fr in v.free]
+    whole_pos = [i for i, (v, fr) in enumerate(free) if fr.name in v.whole]
+    tried: dict = {}
+    centre = [None] * len(whole_pos)
+    for _ in range(rounds):
+        options = [_whole_options(free[i][1], fit_.values[i], c) for i, c in zip(whole_pos, centre)]
+        for combo in itertools.product(*options):
+            if combo not in tried:
+                tried[combo] = _fit_whole_combo(ctx, data, fit_, whole_pos, combo)
+        valid = {c: r for c, r in tried.items() if r[0] is not None}
+        if not valid:
+            return fit_
+        best_combo = min(valid, key=lambda c: valid[c][0].chi2)
+        edge = [(c == o[0] and c > math.ceil(free[i][1].lower)) or (c == o[-1] and c < math.floor(free[i][1].upper))
+                for i, c, o in zip(whole_pos, best_combo, options)]
+        if not any(edge):
+            break
+        centre = list(best_combo)
+    best, keep = valid[best_combo]
+    if best.chi2 - fit_.chi2 > WHOLE_MISFIT_CHI2:
+        return fit_  # the ends are not whole rollers: the continuous fit, its ends counted as parameters
+    w = {c: math.exp(-0.5 * (r[0].chi2 - best.chi2)) for c, r in valid.items()}
+    w = {c: x for c, x in w.items() if x > 1e-9}  # combinations the data rule out (and their inf stds) drop
+    valid = {c: valid[c] for c in w}
+    total = sum(w.values())
+    values, std = [0.0] * len(free), [0.0] * len(free)
+    for i, c in zip(whole_pos, best_combo):
+        values[i] = float(c)
+    for j, i in enumerate(keep):
+        values[i] = best.values[j]
+    for n, i in enumerate(whole_pos):
+        std[i] = math.sqrt(sum(w[c] * (c[n] - values[i]) ** 2 for c in valid) / total)
+    for j, i in enumerate(keep):
+        var = sum(w[c] * (r[0].std[j] ** 2 + (r[0].values[j] - values[i]) ** 2) for c, r in valid.items())
+        std[i] = math.sqrt(var / total) if math.isfinite(var) else math.inf
+    ident, at_bound = [], []
+    for i, (v, fr) in enumerate(free):
+        if i in keep:
+            j = keep.index(i)
+            rel = std[i] / values[i] if fr.kind == "log" and values[i] > 0 else std[i]
+            ident.append(bool(math.isfinite(std[i]) and (rel < IDENTIFIABLE_LOG_STD if fr.kind == "log"
+                                                         else std[i] < 0.25 * (fr.upper - fr.lower))))
+            at_bound.append(best.at_bound[j])
+        else:
+            ident.append(bool(std[i] < 0.25 * (fr.upper - fr.lower)))
+            at_bound.append(False)
+    theta = np.array([fr.encode(x) for (_, fr), x in zip(free, values)])
+    return CandidateFit(fit_.variants, theta, values, std, best.chi2, best.ev, best.k, ident, at_bound, True)
 
 
 def reduced(fit_: CandidateFit, variants: list):
@@ -267,7 +371,7 @@ def fit_pairs(ctx: Context, data, fits: list, variants: list, bic, progress) -> 
     total = len(variants) + len(jobs)
     screened = []
     for n_done, (combo, starts) in enumerate(jobs, start=len(variants) + 1):
-        screened.append((fit(ctx, data, combo, starts, n_polish=1, max_nfev=6), starts))
+        screened.append((fit(ctx, data, combo, starts, n_polish=1, max_nfev=6, profile=False), starts))
         if progress is not None:
             progress(n_done, total, " + ".join(v.title for v in combo))
     screened.sort(key=lambda fs: bic(fs[0]))
@@ -292,7 +396,7 @@ def fit_candidates(ctx: Context, data, names, notes: list, progress, accepted: C
     variants = library_variants(ctx.guide, data, names, notes)
     choices: dict = {}
     for v in variants:
-        choices[v.effect] = choices.get(v.effect, 0) + 1
+        choices[v.effect] = choices.get(v.effect, 0) + v.choices  # whole-number options counted too
     nominal = evaluate(ctx, data, [])
     skipped = [v.title for v in variants if len(v.free) > data.n_data]
     if skipped:

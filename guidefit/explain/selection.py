@@ -98,7 +98,9 @@ def n_responsive(data, nominal, ev) -> int:
 
 def choice_penalty(fit, choices: dict) -> float:
     """2 ln N per effect that chose among N discrete variants (a uniform prior over them)."""
-    return float(sum(2.0 * math.log(max(1, choices.get(v.effect, 1))) for v in fit.variants))
+    n = [choices.get(v.effect, 1) / (v.choices if v.whole and not getattr(fit, "profiled", False) else 1)
+         for v in fit.variants]  # whole-number parameters left continuous are counted in k instead
+    return float(sum(2.0 * math.log(max(1.0, x)) for x in n))
 
 
 def bic(fit, data, choices: dict) -> float:

@@ -58,3 +58,8 @@ def canonical_label(label):
     if low in CARRIAGE_LABELS:
         return low
     return LABEL_ALIASES.get(low)
+
+#: whole-number ends (``Variant.whole``) are kept only while their best fit is within this chi2 of the
+#: continuous fit (the chi-square with 2 dof at p = 0.01): above it the data say the ends are fractional
+#: (a roller partly on the damage) and the continuous fit stands
+WHOLE_MISFIT_CHI2 = 9.21

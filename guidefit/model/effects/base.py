@@ -130,6 +130,16 @@ class Variant:
     default the product of the grids); ``reduces``: ``(parameter, tag)``
     pairs: when that parameter goes to its upper (rigid) bound in a pair fit,
     the variant becomes its variant ``tag``.
+
+    ``whole``: names of free parameters that take whole numbers only (the
+    ends of a roller segment). explain fits them continuously first (to find
+    the basin), then profiles them: every whole-number combination within
+    one of the continuous optimum's floor and ceiling is a discrete choice,
+    the other parameters refitted for each, the best one kept
+    (:func:`guidefit.explain.candidates.profile_whole`). They then count as
+    discrete choices, not fitted parameters: ``choices`` is the number of
+    whole-number combinations the variant stands for (counted in the BIC as
+    ``2 ln N``, like the variants themselves).
     """
 
     effect: str
@@ -138,6 +148,8 @@ class Variant:
     free: tuple
     starts: tuple = ()
     reduces: tuple = ()
+    whole: tuple = ()
+    choices: int = 1
 
     @property
     def title(self) -> str:

@@ -4,7 +4,9 @@ Rollers ``first`` to ``last`` (1-based along +z, roller 1 at the -z end;
 ``rollers_per_row`` of the guide in all) of row ``row`` (1-4 of Eq. 9) carry
 ``factor`` of their stiffness. Whole numbers select whole rollers;
 fractional ends take part of a roller (:func:`guidefit.model.vibration.segment_weights`),
-which is how explain fits the ends as continuous parameters. Whole-row loss
+which is how explain finds the basin with continuous ends before profiling
+them over whole rollers (``Variant.whole``; a roller sits on the damage or
+not, and fractional ends traded off against the factor). Whole-row loss
 is ``row_damage`` (the two never combine; for a segment spanning the row
 model selection prefers ``row_damage``, which has two parameters fewer).
 
@@ -38,9 +40,10 @@ def apply(spec, guide, p):
 
 
 def variants(ctx) -> list[Variant]:
-    """Rows 1-4 (the discrete choice); first, last and factor fitted.
+    """Rows 1-4; first, last and factor fitted, then the ends profiled over whole rollers.
 
-    Starts: segments whose ends sit at 0, 1/4, 1/2, 3/4 and the whole of the
+    Each row's variant stands for its n (n + 1) / 2 whole-roller end pairs
+    (``choices``, counted in the BIC). Starts: segments whose ends sit at 0, 1/4, 1/2, 3/4 and the whole of the
     row (at least a quarter long), factors 0.05, 0.3 and 0.7.
     """
     n = ctx.guide.rollers_per_row
@@ -59,7 +62,9 @@ def variants(ctx) -> list[Variant]:
             lo, hi = (lo + 1 if a > 0 else lo), hi  # adjoining segments do not share a roller
             for f in (0.05, 0.3, 0.7):
                 starts.append((float(lo), float(hi), f))
-    return [Variant("row_segment", f"row {r}", {"row": r}, (first, last, factor), tuple(starts)) for r in (1, 2, 3, 4)]
+    n_ends = n * (n + 1) // 2  # whole-roller segments first <= last: the discrete choices of one row
+    return [Variant("row_segment", f"row {r}", {"row": r}, (first, last, factor), tuple(starts),
+                    whole=("first", "last"), choices=n_ends) for r in (1, 2, 3, 4)]
 
 
 def ambiguity(tags) -> str | None:
@@ -80,7 +85,7 @@ EFFECT = EffectDef(
     apply=apply,
     variants=variants,
     doc=DocRow("rows 1, 2, 3, 4",
-               "`first`, `last` (rollers 1 - Z_L, fractional ends take part of a roller), `factor` (1e-3 - 1)",
+               "`first`, `last` (whole rollers 1 - Z_L, profiled: 231 end pairs per row), `factor` (1e-3 - 1)",
                "local raceway damage: part of one row softer; the segment's size and place along z from the "
                "frequencies and shapes"),
     order=65,
