@@ -294,7 +294,7 @@ def profile_whole(ctx, data, fit_: CandidateFit, rounds: int = 4) -> CandidateFi
         var = sum(w[c] * (r[0].std[j] ** 2 + (r[0].values[j] - values[i]) ** 2) for c, r in valid.items())
         std[i] = math.sqrt(var / total) if math.isfinite(var) else math.inf
     ident, at_bound = [], []
-    for i, (v, fr) in enumerate(free):
+    for i, (_v, fr) in enumerate(free):
         if i in keep:
             j = keep.index(i)
             rel = std[i] / values[i] if fr.kind == "log" and values[i] > 0 else std[i]
