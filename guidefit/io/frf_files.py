@@ -362,23 +362,9 @@ def read_frf_h5_file(p: Path, display: str) -> FrfFile:
     >>> got.recording.runs[0].name, got.frfsets[0].channels, bool(np.allclose(got.frfsets[0].H, frf.H))
     ('vertical', ('acc_A_y',), True)
     """
-    from guidefit.io.watchdog import can_fork, in_child, timeout_s
+    from guidefit.io.watchdog import read_guarded
 
-    timeout = timeout_s()
-    if timeout > 0 and can_fork():
-        return in_child(_read_frf_h5_checked, p, display, timeout)
-    return _read_frf_h5_checked(p, display)
-
-
-def _read_frf_h5_checked(p: Path, display: str) -> FrfFile:
-    try:
-        return _read_frf_h5(p, display)
-    except RecordingError:
-        raise
-    except (OSError, RuntimeError, KeyError, ValueError, TypeError) as exc:
-        from guidefit.io._checks import _first_line
-
-        raise RecordingError(f"{display}: damaged FRF file ({_first_line(exc)})") from None
+    return read_guarded(_read_frf_h5, p, display, "FRF file")
 
 
 def _read_frf_h5(p: Path, display: str) -> FrfFile:
@@ -539,15 +525,12 @@ def _h5_has_frf_group(p: Path, display: str) -> bool:
 
 def _h5_is_frf(p: Path) -> bool:
     """``/frf`` and no ``/runs``; read in the time-limited child where possible (a damaged file can hang HDF5)."""
-    from guidefit.io.watchdog import can_fork, in_child, timeout_s
+    from guidefit.io.watchdog import call_guarded
 
-    timeout = timeout_s()
-    if timeout > 0 and can_fork():
-        try:
-            return in_child(_h5_has_frf_group, p, os.fspath(p), timeout)
-        except RecordingError:
-            return False  # the recording reader says what is wrong with the file
-    return _h5_has_frf_group(p, os.fspath(p))
+    try:
+        return call_guarded(_h5_has_frf_group, p, os.fspath(p))
+    except RecordingError:
+        return False  # the recording reader says what is wrong with the file
 
 
 def holds_frfs(path) -> bool:

@@ -52,7 +52,7 @@ from guidefit.io.records import (
     _raw_read,
 )
 from guidefit.io.registry import FileFormat
-from guidefit.io.watchdog import can_fork, in_child, timeout_s
+from guidefit.io.watchdog import read_guarded
 
 __all__ = ["H5Source", "SignalsWriter", "open_signals_writer", "read_hdf5", "write_hdf5"]
 
@@ -208,19 +208,7 @@ def read_hdf5(p: Path, display: str) -> Recording:
     RecordingError. The fork costs about 30 ms per file on the development
     machine (42 against 8 ms for the sample recording).
     """
-    timeout = timeout_s()
-    if timeout > 0 and can_fork():
-        return in_child(_read_hdf5_checked, p, display, timeout)
-    return _read_hdf5_checked(p, display)
-
-
-def _read_hdf5_checked(p: Path, display: str) -> Recording:
-    try:
-        return _read_hdf5_structure(p, display)
-    except RecordingError:
-        raise
-    except (OSError, RuntimeError, KeyError, ValueError, TypeError) as exc:
-        raise RecordingError(f"{display}: damaged HDF5 file ({_first_line(exc)})") from None
+    return read_guarded(_read_hdf5_structure, p, display, "HDF5 file")
 
 
 def _read_hdf5_structure(p: Path, display: str) -> Recording:

@@ -209,22 +209,9 @@ def _v73_variables(p: Path, display: str, group) -> dict:
 
 
 def _v73_metadata(p: Path, display: str, group) -> dict:
-    from guidefit.io.watchdog import can_fork, in_child, timeout_s
+    from guidefit.io.watchdog import read_guarded
 
-    read = functools.partial(_v73_guarded, group=group)
-    timeout = timeout_s()
-    if timeout > 0 and can_fork():
-        return in_child(read, p, display, timeout)
-    return read(p, display)
-
-
-def _v73_guarded(p: Path, display: str, group) -> dict:
-    try:
-        return _v73_variables(p, display, group)
-    except RecordingError:
-        raise
-    except (OSError, RuntimeError, KeyError, ValueError, TypeError) as exc:
-        raise RecordingError(f"{display}: damaged MAT 7.3 (HDF5) file ({_first_line(exc)})") from None
+    return read_guarded(functools.partial(_v73_variables, group=group), p, display, "MAT 7.3 (HDF5) file")
 
 
 # ------------------------------------------------------------------- channels

@@ -22,7 +22,7 @@ from pathlib import Path
 from guidefit.errors import GuidefitError, RecordingError
 from guidefit.io._checks import _first_line
 
-__all__ = ["HDF5_METADATA_TIMEOUT_S", "in_child", "timeout_s"]
+__all__ = ["HDF5_METADATA_TIMEOUT_S", "call_guarded", "in_child", "read_guarded", "timeout_s"]
 
 
 #: Seconds the HDF5 library may take to read a recording's metadata (attributes, groups,
@@ -131,3 +131,27 @@ def in_child(function, p: Path, display: str, timeout: float):
         raise value
     raise RecordingError(f"{display}: damaged HDF5 file ({value})")
 
+
+def call_guarded(function, p: Path, display: str):
+    """``function(p, display)`` in a time-limited forked child where the guard is on
+    (:func:`timeout_s` > 0 and the platform can fork, :func:`in_child`), else here."""
+    timeout = timeout_s()
+    if timeout > 0 and can_fork():
+        return in_child(function, p, display, timeout)
+    return function(p, display)
+
+
+def read_guarded(read, p: Path, display: str, what: str):
+    """:func:`call_guarded` of a metadata reader whose library errors (h5py raises OSError,
+    RuntimeError, KeyError, ValueError or TypeError on damaged files) become one
+    ``RecordingError``: ``<display>: damaged <what> (<first line>)``."""
+
+    def checked(p: Path, display: str):
+        try:
+            return read(p, display)
+        except RecordingError:
+            raise
+        except (OSError, RuntimeError, KeyError, ValueError, TypeError) as exc:
+            raise RecordingError(f"{display}: damaged {what} ({_first_line(exc)})") from None
+
+    return call_guarded(checked, p, display)
