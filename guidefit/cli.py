@@ -472,8 +472,8 @@ def frf_cmd(recording, estimator, window_text, out_path, fft_precision):
         from guidefit.frf_io import write_frfs
         from guidefit.io.frf_files import read_metadata
 
-        with _written(out_path) as tmp:
-            write_frfs(tmp, frfsets, recording=read_metadata(recording))  # a recording's or FRF file's runs
+        # written whole by the registry's writer (guidefit.outputs), never onto the input (_refuse above)
+        write_frfs(out_path, frfsets, recording=read_metadata(recording))  # a recording's or FRF file's runs
         click.echo(f"FRFs of {len(frfsets)} run(s) written to {out_path}")
     else:
         report.render_frf_summary(frfsets)
