@@ -738,12 +738,6 @@ EXPLAIN_GRID = tuple(float(x) for x in np.geomspace(0.05, 10.0, 11))
 #: Around the coarse grid's best preload factor, DENSE_POINTS factors within exp(+/- DENSE_HALF_WIDTH) are
 #: simulated with every hit (explain's fit interpolates between them).
 DENSE_POINTS, DENSE_HALF_WIDTH = 5, 0.2
-_SETUPS: dict = {}  # (run, label, round(frequency_hz, 6)) -> MeasuredLevel, from prepare_for_explain
-
-
-def _key(run, label, frequency_hz) -> tuple:
-    return (run, label, round(float(frequency_hz), 6))
-
 
 def prepare_for_explain(identification, modes, levels, notes: list):
     """Force levels across runs that differ only in hit force, for explain; modes of their harder runs out.
@@ -751,7 +745,7 @@ def prepare_for_explain(identification, modes, levels, notes: list):
     Each group of runs found by :func:`measure_levels` with two or more
     runs gives :class:`guidefit.explain.ForceLevel` entries (named after its
     lowest run, so they form one trend with the mode identified there), and
-    the measured setups are registered for the simulated forward model
+    each carries its measured setup for the simulated forward model
     (``amplitude_dependence``'s ``forward``). When the levels change with
     force (p < :data:`TREND_P_VALUE`), every mode, labelled or extra, of the
     group's harder runs is left out: a peak distorted or split by contact
@@ -776,12 +770,10 @@ def prepare_for_explain(identification, modes, levels, notes: list):
             harder.update(runs[1:])
             lowest.add(runs[0])
         out = [x for x in out if x.run not in runs]
-        for lv in group:
-            _SETUPS[_key(runs[0], lv.label, lv.frequency_hz)] = lv
-            out.append(ForceLevel(lv.peak_force_n, lv.label, lv.frequency_hz, lv.frequency_std_hz,
-                                  hit_position_m=lv.setup.hit_position_m, hit_direction=lv.setup.hit_direction,
-                                  pulse_s=lv.setup.pulse_s, run=runs[0], hit_forces_n=lv.hit_forces_n,
-                                  band_hz=lv.band_hz))
+        out += [ForceLevel(lv.peak_force_n, lv.label, lv.frequency_hz, lv.frequency_std_hz,
+                           hit_position_m=lv.setup.hit_position_m, hit_direction=lv.setup.hit_direction,
+                           pulse_s=lv.setup.pulse_s, run=runs[0], hit_forces_n=lv.hit_forces_n,
+                           band_hz=lv.band_hz, measured=lv) for lv in group]
     if harder:
         dropped = [m for m in modes if m.run in harder]
         modes = [m for m in modes if m.run not in harder]
@@ -819,14 +811,12 @@ def _trend_p(group) -> float:
 
 
 def registered_levels(levels_data) -> list | None:
-    """The registered :class:`MeasuredLevel` of every level explain compares, or None if any is missing."""
-    out = []
-    for run, label, f in zip(levels_data.run, levels_data.label, levels_data.frequency_hz):
-        lv = _SETUPS.get(_key(run, label, f))
-        if lv is None:
-            return None
-        out.append(lv)
-    return out
+    """The :class:`MeasuredLevel` behind every level explain compares (carried by
+    :func:`prepare_for_explain`'s ForceLevels), or None if any level has none."""
+    measured = list(getattr(levels_data, "measured", ()) or ())
+    if len(measured) != len(levels_data.frequency_hz) or any(lv is None for lv in measured):
+        return None
+    return measured
 
 
 def _ratios(fm: ForwardModel, levels, p: float, n_hits: int) -> list:
@@ -870,7 +860,7 @@ def ratio_table(guide, levels, cache: dict, n_hits: int = SIM_HITS):
     ``(coarse ln p, coarse ratios, dense ln p, dense ratios)``; explain scales
     its candidate's small-amplitude frequency by the interpolated ratio.
     """
-    key = ("nonlinear-ratio", id(guide), tuple(_key(lv.run, lv.label, lv.frequency_hz) for lv in levels))
+    key = ("nonlinear-ratio", id(guide), tuple((lv.run, lv.label, round(float(lv.frequency_hz), 6)) for lv in levels))
     if key not in cache:
         fm = ForwardModel(guide, levels, n_hits)
         coarse = np.array([_ratios(fm, levels, p, 1) for p in EXPLAIN_GRID])

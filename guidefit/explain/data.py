@@ -127,6 +127,7 @@ class _Level:
     hit: tuple
     run: str | None
     explicit_hit: bool  # hit point and direction given (else the label's default)
+    measured: object = None  # the MeasuredLevel behind it (guidefit.nonlinear), for the simulated forward
 
 
 def finite_positive(x) -> bool:
@@ -307,7 +308,7 @@ def _checked_level(j: int, lv) -> _Level | None:
     return _Level(f, float(std), max(float(std), FORCE_LEVEL_FLOOR * f), effective_force(forces),
                   float(np.sum(forces**2)), tuple(float(x) for x in forces), band, lab,
                   (tuple(point), direction, pulse), lv.run,
-                  lv.hit_position_m is not None and lv.hit_direction is not None)
+                  lv.hit_position_m is not None and lv.hit_direction is not None, lv.measured)
 
 
 def experiments(levels: list) -> dict:
@@ -359,6 +360,7 @@ def _grouped_levels(levels: list, labels, runs, notes) -> tuple[LevelData, list]
         hit_forces_n=tuple(lv.hit_forces_n for lv in kept), label=tuple(lv.label for lv in kept),
         run=tuple(lv.run for lv in kept), hit=tuple(lv.hit for lv in kept), band=tuple(lv.band for lv in kept),
         groups=tuple(np.array([remap[j] for j in g]) for g in by_group.values() if len(g) >= 2),
+        measured=tuple(lv.measured for lv in kept),
     ), [levels[j].std_hz for j in used]
 
 

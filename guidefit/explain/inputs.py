@@ -63,6 +63,7 @@ class ForceLevel:
     hit_forces_n: tuple | None = None
     band_hz: tuple | None = None
     shape: dict | None = None
+    measured: object = field(default=None, repr=False, compare=False)  # guidefit.nonlinear.MeasuredLevel
 
 
 # --------------------------------------------------------------------------- result

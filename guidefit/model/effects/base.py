@@ -182,7 +182,8 @@ class LevelData:
     ``weight``: its H1 weight ``sum F^2``; ``hit_forces_n``: every hit's
     peak force; ``hit``: (point_m, unit direction, pulse_s); ``band``: the
     relative half-width of identify's refit (None: +/- max(3 zeta, 3 %));
-    ``groups``: index arrays, one per (run, label) trend.
+    ``groups``: index arrays, one per (run, label) trend; ``measured``: the
+    measured setup of each level where :mod:`guidefit.nonlinear` made it.
     """
 
     frequency_hz: np.ndarray
@@ -195,6 +196,7 @@ class LevelData:
     hit: tuple
     band: tuple
     groups: tuple
+    measured: tuple = ()  # per level its guidefit.nonlinear.MeasuredLevel (or None): the measured hits
 
     @property
     def size(self) -> int:
