@@ -37,7 +37,7 @@ Examples
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -262,7 +262,6 @@ def _band_of(frf, f_lo_hz: float, f_hi_hz: float):
     The jackknife replicates then re-estimate a few hundred bins instead of
     the whole spectrum.
     """
-    from dataclasses import replace
 
     sel = (frf.frequency_hz >= f_lo_hz) & (frf.frequency_hz <= f_hi_hz)
     sums = {k: (v if k == "n_hits" else np.asarray(v)[:, sel]) for k, v in frf.group_sums.items()}
@@ -401,7 +400,6 @@ def _with_jackknife(modes: list, frf_by_run: dict) -> list:
     runs for the modes behind the joint parameters only, after selection;
     the other modes keep the curve fit's own standard error.
     """
-    from dataclasses import replace
 
     out = []
     for m in modes:
@@ -835,6 +833,7 @@ def _identify_global(path, source, guide, model, settings) -> Identification:
     if not collected:
         raise IdentificationError(f"{path}: no run gave an FRF ({'; '.join(warnings) or 'no hits'})")
     order = {run.name: i for i, (run, _, _) in enumerate(collected)}
+    run_of = {run.name: run for run, _, _ in collected}
     first = list(warnings)
     res, runs = _global_pass(collected, guide, model, settings, first)
     levels_only = []
@@ -860,6 +859,9 @@ def _identify_global(path, source, guide, model, settings) -> Identification:
     runs += [RunResult(run.name, frf, rows, [], tuple(run.excitation_direction), frf_channels(run, frf), [])
              for run, frf, rows in levels_only]
     runs.sort(key=lambda r: order[r.name])
+    if settings.force_levels:  # on the final fit only (a pass made again discards its views)
+        runs = [replace(r, force_levels=_force_levels(run_of[r.name], r.frf, r.hits, r.modes, settings, warnings))
+                if r.modes else r for r in runs]
     modes = res.modes if res is not None else []
     joint = {k: next((m for m in modes if m.label == lab), None) for k, lab in JOINT_LABELS.items()}
     if joint["V"] is None and joint["H"] is None:
@@ -929,9 +931,8 @@ def _levels_agree(res, harder: dict) -> bool:
 
 def _global_pass(collected, guide, model, settings, warnings: list):
     """One global fit of the (run, FrfSet, hit rows) triples: the ModalResult (None when it failed,
-    the reason in ``warnings``) and each run's RunResult with its views of the shared modes."""
-    from dataclasses import replace
-
+    the reason in ``warnings``) and each run's RunResult with its views of the shared modes
+    (force levels are added by the caller, on the final fit)."""
     from guidefit import modal_stage
 
     frf_by_run = {run.name: frf for run, frf, _ in collected}
@@ -950,9 +951,8 @@ def _global_pass(collected, guide, model, settings, warnings: list):
                 if run.name in res.fit.runs and res.per_run.get(run.name, [None] * (k + 1))[k] is not None:
                     views.append(replace(m, run=run.name, fit=res.fit.run_mode(k, run.name),
                                          shape=m.shapes.get(run.name, m.shape)))
-        levels = _force_levels(run, frf, rows, views, settings, warnings) if settings.force_levels and views else []
         runs.append(RunResult(run.name, frf, rows, views, tuple(run.excitation_direction),
-                              frf_channels(run, frf), levels))
+                              frf_channels(run, frf)))
     return res, runs
 
 
