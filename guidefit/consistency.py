@@ -701,8 +701,18 @@ def corrected_frf(frf, faults):
                    channels=tuple(frf.channels[i] for i in keep), group_sums=sums)
 
 
-def frf_without(run, drop, settings):
-    """The run's FRFs computed again without the channels in ``drop`` (hits streamed, as identify does).
+def _top_of(frf) -> float | None:
+    """The ``max_frequency_hz`` that gives the bins of ``frf`` again (None: it ends at the Nyquist frequency)."""
+    f = np.asarray(frf.frequency_hz, dtype=float)
+    fs = getattr(frf, "sample_rate_hz", None)
+    if not fs or f.size < 2 or f[-1] >= 0.5 * fs - 0.5 * (f[1] - f[0]):
+        return None
+    return float(f[-1] + 0.5 * (f[1] - f[0]))
+
+
+def frf_without(run, drop, settings, top_hz=None):
+    """The run's FRFs computed again without the channels in ``drop`` (hits streamed, as identify does),
+    up to ``top_hz`` (None: the Nyquist frequency).
 
     A channel that reads another axis can pull the automatic exponential
     window (chosen from every response's decay): its FRFs are not only left
@@ -722,7 +732,7 @@ def frf_without(run, drop, settings):
                             data=None if h.data is None else h.data[:, keep])
             for h in iter_hits(run, settings.hits or HitSettings()))
     return compute_frf(proxy, hits, estimator=settings.estimator, window=settings.window or WindowSettings(),
-                       precision=settings.fft_precision)
+                       precision=settings.fft_precision, max_frequency_hz=top_hz)
 
 
 @dataclass(frozen=True)
@@ -781,7 +791,7 @@ def check_sensors(runs, modes, recording, guide, model, settings, refit) -> Sens
             continue
         run = by_name[rr.name]
         drop = {f.channel for f in faults if f.kind == "axis"} & names
-        frf = corrected_frf(frf_without(run, drop, settings) if drop else rr.frf, faults)
+        frf = corrected_frf(frf_without(run, drop, settings, _top_of(rr.frf)) if drop else rr.frf, faults)
         fitted = refit(run, frf)
         chans = {ch.name: ch for ch in run.channels}
         new_runs.append(replace(rr, frf=frf, modes=fitted, channels=[chans[name] for name in frf.channels]))
@@ -823,7 +833,7 @@ def corrected_runs(collected, faults, settings, recompute: bool = True) -> list:
             out.append((run, frf, rows))
             continue
         drop = {f.channel for f in faults if f.kind == "axis"} & names
-        base = frf_without(run, drop, settings) if drop and recompute else frf
+        base = frf_without(run, drop, settings, _top_of(frf)) if drop and recompute else frf
         out.append((run, corrected_frf(base, faults), rows))
     return out
 

@@ -702,14 +702,14 @@ class _Accumulator:
     :meth:`group_sums` exposes (G, F, R) views.
     """
 
-    def __init__(self, n_samples, n_channels, force_index, n_groups, workers, pair=1):
+    def __init__(self, n_samples, n_channels, force_index, n_groups, workers, pair=1, n_bins=None):
         self.n = n_samples
         self.c = n_channels
         self.fi = force_index
         self.n_groups = n_groups
         self.pair = pair
         self.workers = workers
-        self.F = n_samples // 2 + 1
+        self.F = n_samples // 2 + 1 if n_bins is None else min(n_samples // 2 + 1, n_bins)
         self.resp = _response_index(force_index, n_channels)
         r = n_channels - 1
         self.sff = np.zeros((n_groups, self.F))
@@ -720,7 +720,7 @@ class _Accumulator:
         self._bufs = None
 
     def add(self, Z: np.ndarray, i0: int) -> None:
-        """Add the spectra ``Z`` (n, C, F) of hits i0..i0+n-1."""
+        """Add the spectra ``Z`` (n, C, >= F) of hits i0..i0+n-1 (their first F bins)."""
         n = Z.shape[0]
         ch = min(_CHUNK_BINS, self.F)
         if self._bufs is None or self._bufs[0].shape[0] < n:
@@ -803,8 +803,8 @@ class _Buffers:
     the force.
     """
 
-    def __init__(self, n, c, dtype, force_index, n_groups, workers, pair=1, touch=False):
-        self.key = (n, c, np.dtype(dtype), force_index, n_groups, workers, pair)
+    def __init__(self, n, c, dtype, force_index, n_groups, workers, pair=1, touch=False, n_bins=None):
+        self.key = (n, c, np.dtype(dtype), force_index, n_groups, workers, pair, n_bins)
         self.n_first = max(1, min(_WINDOW_HITS, _WINDOW_BYTES // (8 * n * c)))
         self.block = _block_size(n, c)
         self.n_bufs = workers + 1 if workers > 1 else 1  # one being filled, one per helper, one queued
@@ -814,13 +814,13 @@ class _Buffers:
         else:  # the windows are chosen from float64 copies, then rounded into the buffers
             self.first = np.empty((self.n_first, c, n))
             self.space = np.empty((self.n_bufs * self.block, c, n), dtype=dtype)
-        self.acc = _Accumulator(n, c, force_index, n_groups, workers, pair)
+        self.acc = _Accumulator(n, c, force_index, n_groups, workers, pair, n_bins)
         if touch:
             for a in (self.space, self.first, self.acc.sff, self.acc.sxx, self.acc.sfx):
                 a.fill(0)
 
 
-def _early_buffers(expect, precision, force_index, n_groups, workers, pair=1):
+def _early_buffers(expect, precision, force_index, n_groups, workers, pair=1, n_bins=None):
     """:class:`_Buffers` for records of shape ``expect`` (n_samples, n_channels), made and
     touched by a thread of their own while the caller goes on; ``None`` when there is
     nothing to expect or no second thread. ``.result()`` waits for them."""
@@ -831,14 +831,14 @@ def _early_buffers(expect, precision, force_index, n_groups, workers, pair=1):
     n, c = (int(v) for v in expect)
     pool = ThreadPoolExecutor(max_workers=1)
     future = pool.submit(_Buffers, n, c, fft_dtype(precision), force_index, n_groups, workers, pair,
-                         True)
+                         True, None if n_bins is None else n_bins(n))
     pool.shutdown(wait=False)  # the thread ends with the job
     return future
 
 
 def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windows,
                 n_groups: int, workers: int, force_offset: bool = False,
-                precision: str = "auto", expect=None, pair: int = 1) -> _Accumulator | None:
+                precision: str = "auto", expect=None, pair: int = 1, n_bins=None) -> _Accumulator | None:
     """Window, FFT and accumulate all records, a few hits per FFT call.
 
     ``windows(first)`` gets the first (up to ``_WINDOW_HITS``) raw records as
@@ -866,13 +866,15 @@ def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windo
     n_channels) the records will have, if known: their memory is then made
     by another thread while the first record is pulled (for stored hits,
     while the first pass reads the force of the hits). ``pair``: hits per
-    group turn (see :data:`PAIR_HITS_PER_GROUP`).
+    group turn (see :data:`PAIR_HITS_PER_GROUP`). ``n_bins``: None (every bin),
+    or a function of the record length giving how many of the first bins to sum
+    (the FFT is whole either way; the bins above are not summed).
     """
     from concurrent.futures import ThreadPoolExecutor
 
     import scipy.fft
 
-    early = _early_buffers(expect, precision, force_index, n_groups, workers, pair)
+    early = _early_buffers(expect, precision, force_index, n_groups, workers, pair, n_bins)
     source = iter(items)
     first = None  # the first records, (hits, C, n); in the block buffers when they fit
     k = 0
@@ -880,10 +882,11 @@ def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windo
         if first is None:
             n, c = record.shape
             dtype = fft_dtype(precision, record.dtype)
-            key = (n, c, np.dtype(dtype), force_index, n_groups, workers, pair)
+            kept = None if n_bins is None else n_bins(n)
+            key = (n, c, np.dtype(dtype), force_index, n_groups, workers, pair, kept)
             mem = early.result() if early is not None else None
             if mem is None or mem.key != key:
-                mem = _Buffers(n, c, dtype, force_index, n_groups, workers, pair)
+                mem = _Buffers(n, c, dtype, force_index, n_groups, workers, pair, n_bins=kept)
             early = None
             n_first, block, n_bufs = mem.n_first, mem.block, mem.n_bufs
             space, first, acc = mem.space, mem.first, mem.acc
@@ -1394,6 +1397,7 @@ def compute_frf(
     n_groups: int = DEFAULT_GROUPS,
     workers: int = 2,
     precision: str = "auto",
+    max_frequency_hz: float | None = None,
 ) -> FrfSet:
     """Averaged FRFs of every response channel of one run from its hits.
 
@@ -1412,6 +1416,13 @@ def compute_frf(
         Of the FFTs (:func:`fft_dtype`); ``"auto"``: that of the run's stored
         samples (``run.sample_dtype``; float64 if the run does not say),
         whatever the dtype of the hits' ``data``.
+    max_frequency_hz : float, optional
+        Keep only the bins up to this frequency (``frequency_hz`` then ends
+        there; the FFT and the bins kept are the same as without it). The
+        spectral sums, the largest cost after the FFT, are then made for
+        those bins only: identify asks for a band a few times wider than it
+        fits (:func:`guidefit.identify.frf_top_hz`). None: every bin up to
+        the Nyquist frequency.
 
     Returns
     -------
@@ -1462,12 +1473,26 @@ def compute_frf(
     pair = 2 if stored >= PAIR_HITS_PER_GROUP * _check_groups(n_groups) else 1
     return _frf(accepted(), run.sample_rate_hz, run.force_index, names, estimator, window,
                 run.pretrigger_samples, str(run.name), n_groups, workers, len(names), rejected,
-                _precision_name(dtype), expect, pair)
+                _precision_name(dtype), expect, pair, max_frequency_hz)
+
+
+def kept_bins(n_samples: int, sample_rate_hz: float, max_frequency_hz: float | None) -> int:
+    """How many of the ``n_samples // 2 + 1`` rFFT bins lie at or below ``max_frequency_hz``
+    (all of them for None or a frequency at or above the Nyquist frequency; at least 2)."""
+    every = n_samples // 2 + 1
+    if max_frequency_hz is None:
+        return every
+    top = float(max_frequency_hz)
+    if not top > 0:  # NaN too
+        raise ValueError(f"max_frequency_hz={max_frequency_hz!r}: expected a positive frequency")
+    if top >= sample_rate_hz / 2:
+        return every
+    return max(2, min(every, math.floor(top * n_samples / sample_rate_hz + 1e-9) + 1))
 
 
 def _frf(items, sample_rate_hz, force_index, channel_names, estimator, window,
          pretrigger_samples, run, n_groups, workers, n_channels, rejected, precision,
-         expect=None, pair=1) -> FrfSet:
+         expect=None, pair=1, max_frequency_hz=None) -> FrfSet:
     _check_estimator(estimator)
     fft_dtype(precision)  # checked before any record is read
     n_groups = _check_groups(n_groups)
@@ -1490,8 +1515,11 @@ def _frf(items, sample_rate_hz, force_index, channel_names, estimator, window,
         return choice.arrays(block.shape[-1], fs)
 
     items = _checked_force(_validated(items, run, n_channels), fi, run)
+    n_bins = None if max_frequency_hz is None else (lambda n: kept_bins(n, fs, max_frequency_hz))
+    if n_bins is not None:
+        n_bins(2)  # the frequency is checked before any record is read
     acc = _run_blocks(items, fi, windows, n_groups, max(1, int(workers)), force_offset=True,
-                      precision=precision, expect=expect, pair=pair)
+                      precision=precision, expect=expect, pair=pair, n_bins=n_bins)
     if acc is None:
         reasons = ", ".join(f"{r} x{k}" for r, k in sorted(rejected.items()))
         detail = f" ({sum(rejected.values())} rejected: {reasons})" if rejected else ""
@@ -1503,7 +1531,7 @@ def _frf(items, sample_rate_hz, force_index, channel_names, estimator, window,
 
     template = FrfSet(
         run=run,
-        frequency_hz=_readonly(scipy.fft.rfftfreq(n, 1.0 / fs)),
+        frequency_hz=_readonly(scipy.fft.rfftfreq(n, 1.0 / fs)[:acc.F]),
         channels=tuple(names[k] for k in range(c) if k != fi),
         H=np.empty((0, 0), complex),
         coherence=np.empty((0, 0)),

@@ -673,10 +673,12 @@ def _excitation_warnings(modes, frf_by_run: dict, warnings: list) -> None:
                             "and damping may be off by more than their std")
 
 
-def run_frfs(recording, settings: IdentifySettings, warnings: list, failed: list | None = None):
+def run_frfs(recording, settings: IdentifySettings, warnings: list, failed: list | None = None,
+             max_frequency_hz: float | None = None):
     """Yield (run, FrfSet, hit rows) for every run that gives an FRF; problems go to ``warnings``.
 
     The hit rows of a run that gives no FRF are added to ``failed`` (when given).
+    ``max_frequency_hz``: the FRFs end there (:func:`guidefit.frf.compute_frf`).
 
     Hits stream from the file into the spectral sums (bounded memory); each
     rejected hit is listed with its reason.
@@ -702,7 +704,7 @@ def run_frfs(recording, settings: IdentifySettings, warnings: list, failed: list
         hits = tapped(iter_hits(run, settings.hits or HitSettings()))
         try:
             frf = compute_frf(run, hits, estimator=settings.estimator, window=settings.window or WindowSettings(),
-                              precision=settings.fft_precision)
+                              precision=settings.fft_precision, max_frequency_hz=max_frequency_hz)
         except IdentificationError as exc:
             text = str(exc)
             warnings.append(text if text.startswith(f"run '{run.name}'") else f"run '{run.name}': {text}")
@@ -828,8 +830,10 @@ def _identify_global(path, source, guide, model, settings) -> Identification:
     failed_rows: list[dict] = []
     from_frfs = isinstance(source, FrfFile)
     recording = source.recording if from_frfs else source
+    from guidefit.modal_stage import frf_top_hz
+
     collected = list(file_frfs(source, settings, warnings) if from_frfs
-                     else run_frfs(source, settings, warnings, failed_rows))
+                     else run_frfs(source, settings, warnings, failed_rows, frf_top_hz(model, settings)))
     if not collected:
         raise IdentificationError(f"{path}: no run gave an FRF ({'; '.join(warnings) or 'no hits'})")
     order = {run.name: i for i, (run, _, _) in enumerate(collected)}

@@ -99,6 +99,24 @@ def geometry_of(run, frf) -> RunGeometry:
                        getattr(run, "sample_rate_hz", None))
 
 
+#: identify's FRFs end at this multiple of the band's nominal top (:func:`frf_top_hz`)
+FRF_TOP_FACTOR = 3.0
+
+
+def frf_top_hz(model, settings) -> float:
+    """The highest frequency identify's FRFs need: :data:`FRF_TOP_FACTOR` x the band's nominal
+    top (``settings.f_max_hz``, else 1.3 x the model's highest carriage mode).
+
+    The band (:func:`global_band`) is widened to at most twice that top and
+    never past 0.8 x the last bin, the per-mode checks look below it, so FRFs
+    to 3x the top give every decision the bins it has with every bin; the bins
+    above (at 200 kHz, about 70 % of them) are not summed (the spectral sums
+    of every hit cost more than its FFT).
+    """
+    nominal = settings.f_max_hz or 1.3 * float(np.max(model.frequencies_hz))
+    return FRF_TOP_FACTOR * float(nominal)
+
+
 def global_band(model, frf_by_run: dict, geometry: dict, settings) -> tuple[float, float]:
     """The fitted band: the model's range, cut to what the data can show (see the module docstring)."""
     f_lo = settings.f_min_hz or 0.35 * float(np.min(model.frequencies_hz))
@@ -610,7 +628,8 @@ def _check_band(band, frf_by_run: dict, geometry: dict) -> None:
                                                                   & (x.frequency_hz <= band[1])))
     freq = np.asarray(frf.frequency_hz)
     if np.count_nonzero((freq >= band[0]) & (freq <= band[1])) < MIN_BINS_IN_BAND:
-        n = 2 * (len(freq) - 1)
+        fs = getattr(frf, "sample_rate_hz", None)  # FRFs may end below the Nyquist frequency
+        n = round(fs / float(freq[1] - freq[0])) if fs and len(freq) > 1 else 2 * (len(freq) - 1)
         raise IdentificationError(f"records of about {n} samples give {freq[-1] / max(len(freq) - 1, 1):.0f} Hz "
                                   f"resolution, too coarse for the modes between {band[0]:.0f} and {band[1]:.0f} Hz "
                                   f"(fewer than {MIN_BINS_IN_BAND} bins); longer records are needed")

@@ -480,6 +480,43 @@ def test_threads_and_hit_rows_give_the_same_bits(tmp_path):
                                                               want.force_window_s)
 
 
+def test_max_frequency_keeps_the_first_bins_unchanged(tmp_path):
+    """FRFs that end at ``max_frequency_hz`` are the first bins of the whole ones:
+    the same FFT, the same windows, the same sums bin by bin (to rounding)."""
+    from guidefit.frf import kept_bins
+    from guidefit.hits import iter_hits
+    from guidefit.recording import RunData, read_recording, write_recording
+
+    rng = np.random.default_rng(5)
+    fs, n, hits = 20_000.0, 4000, 9
+    t = np.arange(n) / fs
+    records = np.zeros((hits, n, 2), dtype=np.float32)
+    for i in range(hits):
+        records[i, :, 0] = (50 + 3 * i) * np.where((t >= 0.005) & (t < 0.0055),
+                                                   np.sin(np.pi * (t - 0.005) / 5e-4), 0.0)
+        records[i, :, 1] = np.where(t >= 0.005, np.exp(-200 * (t - 0.005)) * np.sin(2 * np.pi * 700 * (t - 0.005)), 0)
+        records[i] += rng.normal(0, 0.01, (n, 2))
+    run = RunData("vertical", fs, [0, -1, 0], ["force", "acc_A_y"], ["N", "m/s^2"],
+                  [[0, 0, 0], [0.03, 0, 0.045]], [[0, -1, 0], [0, 1, 0]], data=records, layout="hits",
+                  pretrigger_samples=100)
+    write_recording(tmp_path / "hits.h5", run)
+    stored = read_recording(tmp_path / "hits.h5").runs[0]
+    whole = compute_frf(stored, iter_hits(stored))
+    for workers in (1, 2):
+        cut = compute_frf(stored, iter_hits(stored), workers=workers, max_frequency_hz=2_500.0)
+        k = cut.frequency_hz.size
+        assert k == kept_bins(n, fs, 2_500.0) == 501 and cut.frequency_hz[-1] == pytest.approx(2_500.0)
+        np.testing.assert_allclose(cut.frequency_hz, whole.frequency_hz[:k], rtol=1e-15)
+        np.testing.assert_allclose(cut.H, whole.H[:k], rtol=1e-12, atol=0)
+        np.testing.assert_allclose(cut.coherence, whole.coherence[:k], rtol=1e-12, atol=1e-15)
+        for key in ("Sff", "Sxx", "Sfx"):
+            np.testing.assert_allclose(cut.group_sums[key], whole.group_sums[key][:, :k], rtol=1e-12, atol=0)
+    assert kept_bins(n, fs, None) == kept_bins(n, fs, fs) == n // 2 + 1
+    assert kept_bins(n, fs, 1e-9) == 2  # at least the DC bin and one more
+    with pytest.raises(ValueError, match="max_frequency_hz"):
+        compute_frf(stored, iter_hits(stored), max_frequency_hz=float("nan"))
+
+
 @pytest.mark.parametrize("workers", [1, 2, 3])
 def test_an_error_while_adding_a_block_is_raised(monkeypatch, workers):
     import guidefit.frf as frf_module

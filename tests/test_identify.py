@@ -63,6 +63,20 @@ def test_std_is_consistent_with_error(sample_result):
         assert abs(p["value"] - truth[name]["value"]) <= max(5 * p["std"], 1e-4 * p["value"]), name
 
 
+def test_frfs_end_at_three_times_the_band_top(sample_result):
+    """identify sums the spectra only to 3x the band's nominal top (1.3 x the highest model
+    mode), not to the Nyquist frequency; the band and every check stay well inside."""
+    from guidefit.modal_stage import FRF_TOP_FACTOR
+
+    top = FRF_TOP_FACTOR * 1.3 * 5563.6  # MRB35's roll_high (Hz), see guidefit predict
+    for run in sample_result.runs:
+        f = run.frf.frequency_hz
+        assert top - (f[1] - f[0]) < f[-1] <= top * (1 + 1e-3)
+        assert f[-1] < 0.5 * run.frf.sample_rate_hz
+    _lo, hi = sample_result.modal.fit.band_hz
+    assert hi <= 0.8 * min(r.frf.frequency_hz[-1] for r in sample_result.runs)
+
+
 def test_vertical_mode_shape_in_phase(sample_result):
     vertical = next(m for m in sample_result.modes if m.label == "vertical")
     ys = [vertical.shape[f"acc_{p}_y"] for p in "ABCD"]
