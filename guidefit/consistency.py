@@ -82,6 +82,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from guidefit.frf import top_of
+
 #: Relative RMS rigid-fit residual of all shapes below which no sensor fault is looked for.
 FAULT_MIN_RELRES = 0.05
 #: The best correction must cut the residual sum of squares at least this many times.
@@ -701,15 +703,6 @@ def corrected_frf(frf, faults):
                    channels=tuple(frf.channels[i] for i in keep), group_sums=sums)
 
 
-def _top_of(frf) -> float | None:
-    """The ``max_frequency_hz`` that gives the bins of ``frf`` again (None: it ends at the Nyquist frequency)."""
-    f = np.asarray(frf.frequency_hz, dtype=float)
-    fs = getattr(frf, "sample_rate_hz", None)
-    if not fs or f.size < 2 or f[-1] >= 0.5 * fs - 0.5 * (f[1] - f[0]):
-        return None
-    return float(f[-1] + 0.5 * (f[1] - f[0]))
-
-
 def frf_without(run, drop, settings, top_hz=None):
     """The run's FRFs computed again without the channels in ``drop`` (hits streamed, as identify does),
     up to ``top_hz`` (None: the Nyquist frequency).
@@ -791,7 +784,7 @@ def check_sensors(runs, modes, recording, guide, model, settings, refit) -> Sens
             continue
         run = by_name[rr.name]
         drop = {f.channel for f in faults if f.kind == "axis"} & names
-        frf = corrected_frf(frf_without(run, drop, settings, _top_of(rr.frf)) if drop else rr.frf, faults)
+        frf = corrected_frf(frf_without(run, drop, settings, top_of(rr.frf)) if drop else rr.frf, faults)
         fitted = refit(run, frf)
         chans = {ch.name: ch for ch in run.channels}
         new_runs.append(replace(rr, frf=frf, modes=fitted, channels=[chans[name] for name in frf.channels]))
@@ -833,7 +826,7 @@ def corrected_runs(collected, faults, settings, recompute: bool = True) -> list:
             out.append((run, frf, rows))
             continue
         drop = {f.channel for f in faults if f.kind == "axis"} & names
-        base = frf_without(run, drop, settings, _top_of(frf)) if drop and recompute else frf
+        base = frf_without(run, drop, settings, top_of(frf)) if drop and recompute else frf
         out.append((run, corrected_frf(base, faults), rows))
     return out
 

@@ -1490,6 +1490,16 @@ def kept_bins(n_samples: int, sample_rate_hz: float, max_frequency_hz: float | N
     return max(2, min(every, math.floor(top * n_samples / sample_rate_hz + 1e-9) + 1))
 
 
+def top_of(frf) -> float | None:
+    """The ``max_frequency_hz`` that gives the bins of ``frf`` again (for FRFs of some of
+    its hits with its windows); None when ``frf`` ends at the Nyquist frequency."""
+    f = np.asarray(frf.frequency_hz, dtype=float)
+    fs = getattr(frf, "sample_rate_hz", None)
+    if not fs or f.size < 2 or f[-1] >= 0.5 * fs - 0.5 * (f[1] - f[0]):
+        return None
+    return float(f[-1] + 0.5 * (f[1] - f[0]))
+
+
 def _frf(items, sample_rate_hz, force_index, channel_names, estimator, window,
          pretrigger_samples, run, n_groups, workers, n_channels, rejected, precision,
          expect=None, pair=1, max_frequency_hz=None) -> FrfSet:

@@ -522,7 +522,7 @@ def _force_levels(run, frf, rows, modes, settings, warnings: list) -> list[dict]
         hits = (h for h in iter_hits(run, settings.hits or HitSettings()) if h.index in wanted)
         try:
             sub = frf_mod.compute_frf(run, hits, estimator=settings.estimator, window=window,
-                                      precision=frf.fft_precision)
+                                      precision=frf.fft_precision, max_frequency_hz=frf_mod.top_of(frf))
         except IdentificationError as exc:
             warnings.append(f"run '{run.name}': force-level FRF failed ({exc})")
             return []

@@ -471,7 +471,8 @@ def _bin_frf(run, rr, wanted: set, whole: bool):
     if not whole:
         window = frf_mod.WindowSettings(force_window_s=frf.force_window_s or math.inf,
                                         exp_tau_s=frf.exp_window_tau_s or math.inf)
-        frf = frf_mod.compute_frf(run, hits, estimator=frf.estimator, window=window, workers=1)
+        frf = frf_mod.compute_frf(run, hits, estimator=frf.estimator, window=window, workers=1,
+                                  max_frequency_hz=frf_mod.top_of(frf))
     return frf, float(np.median(pulses)), shape
 
 
