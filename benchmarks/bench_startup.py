@@ -9,9 +9,11 @@
    ``guidefit.cli``, then ``identify()`` cold (first call: pays the lazy
    imports of scipy.optimize, h5py, ...) and warm (second call), called as a
    library (so with the library's BLAS threading, not the command line's),
-   split into FRFs (read + hit checks + spectra: ``compute_frf``), modal fit
-   (``modes.auto_fit``), jackknife (``identify._jackknife``), and the rest
-   (model, labelling, half-power), plus rendering the rich tables. The phases
+   split into FRFs (read + hit checks + spectra: ``compute_frf``), the global
+   modal stage (``modal_stage.identify_frfs``: LSCF diagram, refinement,
+   jackknife and selection spread, shapes, labels), the sensor check and the
+   gate (``consistency``), force levels, and the rest (reading the file's
+   metadata, the model, warnings), plus rendering the rich tables. The phases
    are timed by wrapping those functions (no library change).
 3. ``python -X importtime`` of ``guidefit identify --no-jackknife`` on the
    sample: the heaviest imports (cumulative, as nested by the importer).
@@ -53,9 +55,10 @@ def phases_worker(path: str) -> dict:
 
     t_cli = time.perf_counter() - t0
 
+    import guidefit.consistency as cons
     import guidefit.frf as frf_mod
     import guidefit.identify as ident
-    import guidefit.modes as modes_mod
+    import guidefit.modal_stage as stage
 
     clock = {}
 
@@ -69,9 +72,10 @@ def phases_worker(path: str) -> dict:
         return wrapper
 
     frf_mod.compute_frf = timed("frf", frf_mod.compute_frf)
-    modes_mod.auto_fit = timed("fit", modes_mod.auto_fit)
-    ident._jackknife = timed("jackknife", ident._jackknife)
-    ident._half_power_entry = timed("half_power", ident._half_power_entry)
+    stage.identify_frfs = timed("modal", stage.identify_frfs)
+    for name in ("check_global", "plausibility", "global_mass_warnings"):
+        setattr(cons, name, timed("consistency", getattr(cons, name)))
+    ident._force_levels = timed("levels", ident._force_levels)
 
     from rich.console import Console
 
@@ -183,10 +187,10 @@ def main() -> None:
           "one fresh process each; cold = first call in the process (includes the lazy imports), "
           "warm = second call\n")
     keys = [("frf", "FRFs: read + hit checks + spectra (compute_frf)"),
-            ("fit", "modal curve fit (modes.auto_fit)"),
-            ("jackknife", "jackknife refits (identify._jackknife)"),
-            ("half_power", "half-power entries"),
-            ("rest", "rest (model, labels, selection)"),
+            ("modal", "global modal stage (modal_stage.identify_frfs)"),
+            ("consistency", "sensor check and gate (consistency)"),
+            ("levels", "force levels (identify._force_levels)"),
+            ("rest", "rest (metadata, model, warnings)"),
             ("total", "**identify() total**"),
             ("render", "render rich tables")]
     head = ["phase"]
