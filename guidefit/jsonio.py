@@ -7,12 +7,18 @@ from pathlib import Path
 
 from guidefit.errors import RecordingError
 
+#: a result file larger than this is refused before it is read (a batch of ten thousand
+#: recordings' JSON Lines is about 1 GB less than this; JSON text takes ~10x its size in memory)
+MAX_JSON_BYTES = 2 * 2**30
+
 
 def read_json_documents(path) -> list:
     """The documents of a JSON file: ``[doc]`` for one JSON document, one per line for JSON Lines.
 
     Raises :class:`~guidefit.errors.RecordingError` (one line, naming the file
-    and the line) for a missing, unreadable, empty or malformed file.
+    and the line) for a missing, unreadable, empty or malformed file, for
+    something that is not a regular file (a FIFO or a device would block or
+    never end) and for a file over :data:`MAX_JSON_BYTES`.
 
     >>> import tempfile, os
     >>> with tempfile.NamedTemporaryFile("w", suffix=".jsonl", delete=False) as fh:
@@ -22,6 +28,21 @@ def read_json_documents(path) -> list:
     >>> os.remove(fh.name)
     """
     p = Path(path)
+    try:
+        info = p.stat()
+    except FileNotFoundError:
+        raise RecordingError(f"{p}: no such file") from None
+    except OSError as exc:
+        raise RecordingError(f"{p}: cannot read ({exc.__class__.__name__})") from None
+    import stat
+
+    if stat.S_ISDIR(info.st_mode):
+        raise RecordingError(f"{p}: is a directory; expected a JSON result file")
+    if not stat.S_ISREG(info.st_mode):
+        raise RecordingError(f"{p}: not a regular file; expected a JSON result file")
+    if info.st_size > MAX_JSON_BYTES:
+        raise RecordingError(f"{p}: {info.st_size / 2**30:.1f} GB, larger than the {MAX_JSON_BYTES / 2**30:.0f} GB "
+                             "a JSON result file may have; not a result file?")
     try:
         text = p.read_text(encoding="utf-8")
     except FileNotFoundError:

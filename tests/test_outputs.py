@@ -265,6 +265,32 @@ def test_a_huge_guide_file_is_refused_before_it_is_parsed(tmp_path):
     assert code == 2 and "larger than" in err, err
 
 
+@pytest.mark.parametrize("what", ["huge", "fifo", "folder"])
+@pytest.mark.parametrize("command", ["explain", "export"])
+def test_a_json_input_that_is_huge_or_not_a_file_is_one_line_exit_2(tmp_path, monkeypatch, command, what):
+    """A result file is refused before it is read when it is larger than the cap (a sparse
+    file: no disk used), a FIFO (reading would block) or a folder."""
+    import os
+
+    import guidefit.jsonio as jsonio
+
+    path = tmp_path / "result.json"
+    if what == "huge":
+        monkeypatch.setattr(jsonio, "MAX_JSON_BYTES", 1_000_000)
+        with open(path, "wb") as fh:
+            fh.truncate(1_000_001)
+    elif what == "fifo":
+        os.mkfifo(path)
+    else:
+        path.mkdir()
+    args = ("explain", "--modes", path) if command == "explain" else ("export", path)
+    code, _, err = _cli(*args)
+    assert code == 2, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "internal error" not in err, err
+    assert {"huge": "larger than", "fifo": "not a regular file", "folder": "directory"}[what] in err, err
+
+
 @pytest.mark.parametrize("kind", ["guide-toml", "check-toml", "modes-json", "export-json", "modes-jsonl"])
 def test_deeply_nested_documents_are_one_line_exit_2(case, kind):
     folder = case.parent
