@@ -177,6 +177,26 @@ def _command_lines(res: ReportResults) -> list[str]:
             f"guidefit explain {path} --json {' '.join(map(shlex.quote, explain_opts))}"]
 
 
+def _daq_rows(path) -> list[list[str]]:
+    """Provenance of the DAQ files a test setup (``.toml``) points at: each file's name, SHA-256 and
+    size, once per file (the setup's own hash says nothing of the data it reads)."""
+    import os
+
+    if not str(path).lower().endswith(".toml"):
+        return []
+    from guidefit.io.setup import load_setup
+
+    rows, seen = [], set()
+    for run in load_setup(path).runs:
+        key = os.path.realpath(run.path)
+        if key in seen:
+            continue
+        seen.add(key)
+        rows.append([f"DAQ file ({run.name})", f"{run.file}: SHA-256 {file_sha256(run.path)}, "
+                     f"{os.path.getsize(run.path)} bytes"])
+    return rows
+
+
 def _header(res: ReportResults) -> list[str]:
     import datetime
     import os
@@ -188,6 +208,7 @@ def _header(res: ReportResults) -> list[str]:
     rec = read_metadata(res.path)  # a recording's or an FRF file's runs and channels
     now = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
     meta = [["file", res.path], ["SHA-256", file_sha256(res.path)], ["size", f"{os.path.getsize(res.path)} bytes"],
+            *_daq_rows(res.path),
             ["description", rec.description or "-"], ["guide", f"{ident.guide.name} (M = {ident.guide.mass_kg:g} kg)"],
             ["date", now], ["guidefit", __version__]]
     parts = [f"<h1>guidefit report: {_e(res.path)}</h1>", "<h2>Provenance</h2>",

@@ -158,6 +158,26 @@ def _lines(result):
     return [line for line in result.stderr.splitlines() if line.strip()]
 
 
+def test_the_html_report_hashes_the_daq_files_a_setup_reads(folder):
+    """The report's provenance names each DAQ file once, with its SHA-256 and size: the
+    setup's own hash says nothing of the data."""
+    import hashlib
+
+    from guidefit.html_report import _daq_rows
+
+    (folder / "test.toml").write_text(GOOD)
+    rows = _daq_rows("test.toml")
+    assert [r[0] for r in rows] == ["DAQ file (vertical)", "DAQ file (lateral)"]
+    for (_, text), name in zip(rows, ("vertical.tdms", "lateral.tdms")):
+        data = (folder / name).read_bytes()
+        assert text == f"{name}: SHA-256 {hashlib.sha256(data).hexdigest()}, {len(data)} bytes"
+    tdms(folder / "both.tdms", groups=["vertical", "lateral"])
+    text = edit(GOOD, 'file = "vertical.tdms"', 'file = "both.tdms"\ngroup = "vertical"')
+    (folder / "test.toml").write_text(edit(text, 'file = "lateral.tdms"', 'file = "both.tdms"\ngroup = "lateral"'))
+    assert [r[0] for r in _daq_rows("test.toml")] == ["DAQ file (vertical)"]  # one file, hashed once
+    assert _daq_rows(folder / "x.h5") == []
+
+
 # (name, edit of GOOD or a callable on the folder, expected message (regex, after "guidefit: error: "))
 MALFORMED = [
     ("negative sensitivity", ("sensitivity_mv = 10.2", "sensitivity_mv = -10.2"),
