@@ -904,3 +904,26 @@ def test_first_pass_over_half_the_force_judges_as_the_full_median(tmp_path, monk
         assert float(np.median(values + extra)) <= bound
     assert hits_module._median_upper_bound([], 0) is None
     assert hits_module._median_upper_bound([1.0], 1) == float("inf")
+
+
+@pytest.mark.parametrize("n", [5, 8192, 8193, 30_001])
+@pytest.mark.parametrize("dtype", [np.float32, np.int16, np.float64])
+def test_rows_from_raw_is_the_plain_conversion_and_its_extremes(n, dtype):
+    """Block-by-block conversion gives exactly ``float64(raw.T) * scale`` and the rows' max and min,
+    NaN and Inf propagating as in ``rows.max(axis=1)`` (a NaN or an Inf at a block edge too)."""
+    rng = np.random.default_rng(n)
+    raw = (rng.normal(0, 1000, (n, 3))).astype(dtype)
+    scale = np.array([1.0, 9.80665, 2.5e-3])
+    for bad in (None, np.nan, np.inf):
+        data = raw.copy()
+        if bad is not None and np.issubdtype(dtype, np.floating):
+            data[min(n - 1, 8191), 1] = bad
+            data[n - 1, 2] = -bad
+        for sc in (None, scale):
+            rows = np.empty((3, n))
+            tops, bottoms = hits_module._rows_from_raw(rows, data, sc)
+            want = data.T.astype(np.float64) * (1.0 if sc is None else sc[:, None])
+            # one correctly rounded IEEE multiply per element, no reduction order: equal on any CPU
+            np.testing.assert_array_equal(rows, want)
+            np.testing.assert_array_equal(tops, want.max(axis=1))
+            np.testing.assert_array_equal(bottoms, want.min(axis=1))
