@@ -19,12 +19,18 @@ identify
     the global modal fit (LSCF diagram, refinement, jackknife over hit
     groups), shapes, labels, sensor check, gate, Eq. (24)-(29).
 
+The same comparison as whole processes (interpreter start and imports
+included, timed from outside): a minimal floor script (``python -c``:
+imports h5py and scipy.fft, reads every hit, one rfft each) against the
+command ``guidefit identify FILE`` (its imports, the work, the rich table).
+
 Run: ``python benchmarks/bench_identify_e2e.py [--quick] [--repeat N]``.
 """
 
 from __future__ import annotations
 
 import argparse
+import shutil
 import sys
 import time
 from pathlib import Path
@@ -52,6 +58,40 @@ def w_identify(path):
 WORKERS = {"floor32": F.w_floor32, "frf": F.w_guidefit, "identify": w_identify}
 LABELS = {"floor32": "floor (float32): read + one rfft pass", "frf": "guidefit FRF only (compute_frf)",
           "identify": "guidefit identify, end to end"}
+
+
+#: the floor as a whole process: nothing imported but what reading and one FFT need
+FLOOR_PROCESS = """
+import sys
+import h5py
+import scipy.fft
+with h5py.File(sys.argv[1], "r") as f:
+    ds = f["runs"]["vertical"]["hits"]
+    acc = 0.0
+    for i in range(ds.shape[0]):
+        acc += float(abs(scipy.fft.rfft(ds[i], axis=0, workers=2)[1, 0]))
+print(acc)
+"""
+
+
+def process_cmd(name: str, path: Path) -> list[str]:
+    """The whole-process variants: the floor script, or the guidefit command."""
+    if name == "floor_process":
+        return [sys.executable, "-c", FLOOR_PROCESS, str(path)]
+    exe = shutil.which("guidefit")
+    return [exe] if exe else [sys.executable, "-m", "guidefit"]
+
+
+PROCESSES = {"floor_process": "floor as a process: python -c (h5py, scipy.fft; read + one rfft pass)",
+             "cli": "guidefit identify FILE (the command, whole process)"}
+
+
+def run_process(name: str, path: Path) -> dict:
+    cmd = process_cmd(name, path) + ([] if name == "floor_process" else ["identify", str(path)])
+    m = C.measure(cmd)
+    if m["returncode"] not in (0, 1):  # 1: a gate or check, still a whole run
+        raise RuntimeError(f"{name} failed:\n{m['stderr'][-2000:]}")
+    return m
 
 
 def run_once(name: str, path: Path) -> dict:
@@ -90,12 +130,17 @@ def main() -> None:
         with open(path, "rb") as fh:  # into the page cache
             while fh.read(1 << 24):
                 pass
-        task = bar.add_task("variants", total=len(WORKERS) * repeat)
+        task = bar.add_task("variants", total=(len(WORKERS) + len(PROCESSES)) * repeat)
         runs = {name: [] for name in WORKERS}
+        procs = {name: [] for name in PROCESSES}
         for k in range(repeat):
             for name in WORKERS:
                 bar.update(task, description=f"{name}, round {k + 1}/{repeat}")
                 runs[name].append(run_once(name, path))
+                bar.advance(task)
+            for name in PROCESSES:
+                bar.update(task, description=f"{name}, round {k + 1}/{repeat}")
+                procs[name].append(run_process(name, path))
                 bar.advance(task)
     res = {name: sorted(ms, key=lambda m: m["child"]["seconds"])[len(ms) // 2] for name, ms in runs.items()}
     floor = res["floor32"]["child"]["seconds"]
@@ -111,6 +156,17 @@ def main() -> None:
     ratio = ident["seconds"] / floor
     print(f"\nidentify: f_V = {ident['f_V_hz']:.2f} Hz, {ident['n_modes']} modes, gate: {ident['gate']}")
     print(f"target: identify within 1.5x the floor: {ratio:.2f}x -> {'met' if ratio <= 1.5 else 'NOT met'}")
+    walls = {name: sorted(m["wall_s"] for m in ms) for name, ms in procs.items()}
+    floor_p = walls["floor_process"][len(walls["floor_process"]) // 2]
+    prow = []
+    for name, w in walls.items():
+        med = w[len(w) // 2]
+        cpu = sorted(m["cpu_s"] for m in procs[name])[len(w) // 2]
+        rss = max(m["rss_mb"] for m in procs[name])
+        prow.append([PROCESSES[name], f"{med:.2f}", ", ".join(f"{x:.2f}" for x in w), f"{cpu:.2f}",
+                     f"{med / floor_p:.2f}", f"{rss:.0f}"])
+    print("\nwhole processes (interpreter start and imports included), median:\n")
+    print(C.md_table(["process", "wall s", "runs (s, sorted)", "CPU s", "x floor process", "peak RSS MB"], prow))
     C.print_load()
     path.unlink(missing_ok=True)
 

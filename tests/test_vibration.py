@@ -157,3 +157,20 @@ def test_unrestrained_model_is_reported():
 def test_per_roller_stiffness_shape_checked():
     with pytest.raises(ModelError, match="roller stiffness"):
         vib.rollers_from_guide(MRB35, np.ones(5))
+
+
+def test_best_assignment_has_the_hungarian_methods_total():
+    """The exhaustive label assignment reaches the optimum of scipy's Hungarian method."""
+    from scipy.optimize import linear_sum_assignment
+
+    from guidefit.model.vibration import _best_assignment
+
+    rng = np.random.default_rng(3)
+    for n, k in [(5, 5), (6, 5), (8, 5), (3, 3), (7, 4)]:
+        for _ in range(20):
+            score = rng.random((n, k))
+            rows, cols = _best_assignment(score)
+            r2, c2 = linear_sum_assignment(-score)
+            assert len(set(rows)) == k and sorted(cols) == list(range(k))
+            assert np.all(np.diff(rows) > 0)
+            assert score[rows, cols].sum() == pytest.approx(score[r2, c2].sum(), rel=1e-12)

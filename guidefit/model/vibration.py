@@ -410,19 +410,45 @@ def _energy_fractions(shapes: np.ndarray, m: np.ndarray, n_dof: int) -> np.ndarr
     return (np.vstack(groups) / total).T
 
 
+#: assignments tried one by one at most (beyond: scipy's Hungarian method)
+_MAX_ASSIGNMENTS = 200_000
+
+
+def _best_assignment(score: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, cols) giving each column of ``score`` (n, k), k <= n, its own row with the largest
+    total score; rows ascending, as :func:`scipy.optimize.linear_sum_assignment` of ``-score``.
+
+    Every assignment is tried (at most 5 labels over the few modes of a carriage, about 100 to
+    7000 of them): the same optimum as the Hungarian method, without the 0.2 s import of
+    :mod:`scipy.optimize` that identify would otherwise pay for it (the first of its 0.2-1 s).
+    """
+    import itertools
+    import math
+
+    n, k = score.shape
+    if math.perm(n, k) > _MAX_ASSIGNMENTS:
+        from scipy.optimize import linear_sum_assignment
+
+        return linear_sum_assignment(-score)
+    perms = np.array(list(itertools.permutations(range(n), k)), dtype=int).reshape(-1, k)
+    totals = score[perms, np.arange(k)].sum(axis=1)
+    best = perms[int(np.argmax(totals))]  # row of each column
+    order = np.argsort(best)
+    return best[order], np.arange(k)[order]
+
+
 def _label_modes(energy: np.ndarray) -> tuple[str, ...]:
     """Assign vertical/pitch/yaw/roll_low/roll_high to the modes that carry each motion most.
 
-    One mode per label (Hungarian assignment on the energy shares); the two
-    u-phi labels go in frequency order; any further modes are ``support_<n>``.
+    One mode per label (the assignment of largest total energy share,
+    :func:`_best_assignment`); the two u-phi labels go in frequency order; any
+    further modes are ``support_<n>``.
     """
-    from scipy.optimize import linear_sum_assignment
-
     n = energy.shape[0]
     # columns: vertical, pitch, yaw, uphi, uphi
     score = np.column_stack([energy[:, 0], energy[:, 1], energy[:, 2], energy[:, 3], energy[:, 3]])
     n_lab = min(n, 5)
-    rows, cols = linear_sum_assignment(-score[:, :n_lab] if n >= 5 else -score[:, :n])
+    rows, cols = _best_assignment(score[:, :n_lab])
     labels = [""] * n
     uphi_modes = sorted(r for r, c in zip(rows, cols) if c >= 3)
     for r, c in zip(rows, cols):
