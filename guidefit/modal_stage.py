@@ -273,11 +273,19 @@ def _assemble_in(basis, constants, sensors, drive, runs, iterations):
 
 
 def _driven_motion(q0, constants, sensors, drive, runs):
-    """Least squares of m_j = (S_j q)(g_j . q) from the free-scale solution (mass-normalised q)."""
-    import scipy.optimize
+    """Least squares of m_j = (S_j q)(g_j . q) from the free-scale solution (mass-normalised q).
 
+    With at least as many readings as unknowns: :func:`guidefit.lsq.minimize` with the exact
+    Jacobian ``-(S_j (g_j . q) + (S_j q) g_j^T)``; with fewer (a minimiser among many, which the
+    path decides) scipy's ``trf`` as it always was.
+    """
     def resid(q):
         return np.concatenate([constants[r] - (sensors[r] @ q) * float(np.asarray(drive[r]) @ q) for r in runs])
+
+    def resid_jac(q):
+        jac = [-(sensors[r] * float(np.asarray(drive[r]) @ q) + np.outer(sensors[r] @ q, np.asarray(drive[r])))
+               for r in runs]
+        return resid(q), np.vstack(jac)
 
     # scale of the unit-norm q0 that best fits the quadratic model
     y = np.concatenate([(sensors[r] @ q0) * float(np.asarray(drive[r]) @ q0) for r in runs])
@@ -286,9 +294,15 @@ def _driven_motion(q0, constants, sensors, drive, runs):
     if den <= 0 or float(y @ b) <= 0:
         return q0
     start = q0 * math.sqrt(float(y @ b) / den)
-    method = "lm" if sum(np.size(constants[r]) for r in runs) >= q0.size else "trf"
-    res = scipy.optimize.least_squares(resid, start, method=method, xtol=1e-12, ftol=1e-12)
-    return res.x if np.sum(res.fun**2) <= np.sum(resid(start) ** 2) else start
+    if sum(np.size(constants[r]) for r in runs) >= q0.size:
+        from guidefit import lsq
+
+        x = lsq.minimize(*lsq.from_residual(resid_jac), start, tol=1e-13).x
+    else:
+        import scipy.optimize
+
+        x = scipy.optimize.least_squares(resid, start, method="trf", xtol=1e-12, ftol=1e-12).x
+    return x if np.sum(resid(x) ** 2) <= np.sum(resid(start) ** 2) else start
 
 
 def _ambiguity(energy: dict, observed: np.ndarray, label: str, model_labels) -> tuple[list, str] | None:
