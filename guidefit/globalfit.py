@@ -140,12 +140,35 @@ def one_blas_thread():
     machine each call waits for that thread to be scheduled. On the 20-hit,
     0.5 s benchmark recording (bench_identify_e2e.py) this made the global
     fit 7x slower (1.9 s against 0.26 s); the results are the same.
+
+    The controller is built once per process (:func:`_blas_controller`):
+    ``threadpoolctl.threadpool_limits`` scans every loaded library on each
+    call, 1-10 ms, more than some of the fits it guards.
     """
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover - threadpoolctl is a dependency
+    controller = _blas_controller()
+    if controller is None:  # pragma: no cover - threadpoolctl is a dependency
         return contextlib.nullcontext()
-    return threadpool_limits(limits=1, user_api="blas")
+    return controller.limit(limits=1, user_api="blas")
+
+
+_CONTROLLER: list = []
+
+
+def _blas_controller():
+    """The process's threadpoolctl controller (None without threadpoolctl), made on first use.
+
+    scipy.linalg is imported first so that its own BLAS (a second OpenBLAS
+    in the wheels) is loaded when the libraries are scanned, and limited too.
+    """
+    if not _CONTROLLER:
+        try:
+            import scipy.linalg  # noqa: F401  (loads scipy's BLAS before the scan)
+            from threadpoolctl import ThreadpoolController
+        except ImportError:  # pragma: no cover - threadpoolctl is a dependency
+            _CONTROLLER.append(None)
+        else:
+            _CONTROLLER.append(ThreadpoolController())
+    return _CONTROLLER[0]
 
 
 def _mac(a: np.ndarray, b: np.ndarray) -> float:
@@ -294,11 +317,67 @@ def _clusters(d: Stabilisation, idx: np.ndarray) -> list[np.ndarray]:
         return []
     if idx.size == 1:
         return [idx]
-    from scipy.cluster.hierarchy import fcluster, linkage
-
     x = np.stack([np.log(d.frequency_hz[idx]) / CLUSTER_LN_F, np.log(d.damping_ratio[idx]) / CLUSTER_LN_ZETA], 1)
-    labels = fcluster(linkage(x, method="average"), t=1.0, criterion="distance")
+    labels = average_linkage_labels(x, 1.0)
     return [idx[labels == k] for k in np.unique(labels)]
+
+
+def average_linkage_labels(x: np.ndarray, t: float) -> np.ndarray:
+    """Flat clusters of the points ``x`` (N, D): average-linkage (UPGMA) merges up to distance ``t``.
+
+    The partition of ``scipy.cluster.hierarchy.fcluster(linkage(x, "average"), t,
+    criterion="distance")`` (Euclidean distances; the Lance-Williams update
+    ``(n_a d_ak + n_b d_bk) / (n_a + n_b)``), written with numpy because
+    importing scipy.cluster costs about 20 ms, more than the clustering of a
+    diagram. Points whose first coordinates are more than ``t`` apart are
+    never joined (every distance across such a gap exceeds ``t``, and so does
+    any average of them), so the points are split at those gaps first and
+    each part is clustered on its own. Labels are 0, 1, ... in order of each
+    cluster's lowest first coordinate.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> average_linkage_labels(np.array([[0.0, 0.0], [0.5, 0.0], [5.0, 0.0], [0.2, 0.3]]), 1.0).tolist()
+    [0, 0, 1, 0]
+    """
+    x = np.asarray(x, dtype=float)
+    labels = np.empty(x.shape[0], dtype=int)
+    order = np.argsort(x[:, 0], kind="stable")
+    n_labels = 0
+    for part in np.split(order, np.flatnonzero(np.diff(x[order, 0]) > t) + 1):
+        for members in _agglomerate(x[part], t):
+            labels[part[members]] = n_labels
+            n_labels += 1
+    return labels
+
+
+def _agglomerate(x: np.ndarray, t: float) -> list[np.ndarray]:
+    """Average-linkage clusters of a few points (index arrays into ``x``): merge the closest pair while
+    its distance is at most ``t`` (average linkage is monotone, so this is the dendrogram cut at t)."""
+    n = x.shape[0]
+    if n == 1:
+        return [np.zeros(1, dtype=int)]
+    diff = x[:, None, :] - x[None, :, :]
+    dist = np.sqrt(np.sum(diff * diff, axis=2))  # as scipy's pdist: sum of squared differences, then sqrt
+    np.fill_diagonal(dist, np.inf)
+    size = np.ones(n)
+    members = [[i] for i in range(n)]
+    while True:
+        k = int(np.argmin(dist))
+        a, b = divmod(k, n)
+        if not dist[a, b] <= t:
+            break
+        merged = (size[a] * dist[a] + size[b] * dist[b]) / (size[a] + size[b])
+        dist[a, :] = merged
+        dist[:, a] = merged
+        dist[a, a] = np.inf
+        dist[b, :] = np.inf
+        dist[:, b] = np.inf
+        size[a] += size[b]
+        members[a] += members[b]
+        members[b] = []
+    return [np.array(sorted(m)) for m in sorted((m for m in members if m), key=lambda m: x[m, 0].min())]
 
 
 def select_poles(d: Stabilisation, min_order_share: float = MIN_ORDER_SHARE,
