@@ -63,6 +63,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from guidefit.errors import IdentificationError
+from guidefit.globalvp import Fit, SharedProblem, gauss_newton, solve
 
 #: stability limits between consecutive orders: frequency, damping (relative), participation MAC
 STABLE_FREQUENCY = 0.01
@@ -485,172 +486,11 @@ def _grid_key(frf) -> tuple:
     return (f.size, round(float(f[0]), 6), round(float(f[1] - f[0]), 9) if f.size > 1 else 0.0)
 
 
-def _in_band(frf, lo: float, hi: float):
-    """The FrfSet restricted to [lo, hi] (group sums included) for cheap jackknife replicates."""
-    from dataclasses import replace
-
-    sel = (frf.frequency_hz >= lo) & (frf.frequency_hz <= hi)
-    sums = {k: (v if k == "n_hits" else np.asarray(v)[:, sel]) for k, v in (frf.group_sums or {}).items()}
-    return replace(frf, frequency_hz=frf.frequency_hz[sel], H=frf.H[sel], coherence=frf.coherence[sel],
-                   group_sums=sums)
-
-
-class _Shared:
-    """Variable-projection problem of one band: FRF columns in groups (runs), each group's basis evaluated
-    at ``s + 1/tau`` of its exponential window (the windowed FRF is ``H(s + 1/tau)``), residues and residual
-    terms per column (internal)."""
-
-    def __init__(self, f, H, groups, shifts, terms=None, scale=None):
-        from guidefit import modes as modes_mod
-
-        self.m = modes_mod
-        self.f = np.asarray(f, float)
-        self.s = 2j * np.pi * self.f
-        self.terms = tuple(terms or modes_mod._DEFAULT_RESIDUALS)
-        if scale is None:
-            rms = np.sqrt(np.mean(np.abs(H) ** 2, axis=0))
-            scale = 1.0 / np.where(rms > 0, rms, 1.0)
-        self.scale = np.asarray(scale, float)
-        self.Y = modes_mod._stack(H * self.scale)
-        self.groups = list(groups)  # slices of columns
-        self.shifts = [float(x) for x in shifts]  # sigma_w (1/s) per group
-
-    def _design(self, p, shift):
-        # exponential window e^{-t/tau} on force and response: H_w(s) = H(s + 1/tau) exactly (Laplace shift), so the
-        # whole basis (the s^2 of the accelerance and the residual terms too) is evaluated at s + 1/tau with the true
-        # poles; only moving the poles (s^2 / (s - p + 1/tau)) biased a 2 kHz mode by -0.0024 % at tau = 0.05 s
-        Phi = self.m._stack(self.m._basis(self.s + shift, p, self.terms))
-        norm = np.sqrt(np.sum(Phi**2, axis=0))
-        norm[norm == 0] = 1.0
-        return Phi / norm, norm
-
-    def residual(self, wn, z) -> np.ndarray:
-        p = self.m._poles(wn, z)
-        E = np.empty_like(self.Y)
-        for g, sh in zip(self.groups, self.shifts):
-            Phi, _ = self._design(p, sh)
-            E[:, g] = self.m._ls_residual(Phi, self.Y[:, g])
-        return E.ravel()
-
-    def jacobian(self, wn, z) -> np.ndarray:
-        """Exact projected Jacobian d residual / d (ln w_n, ln zeta) (Golub-Pereyra, as in guidefit.modes)."""
-        n = wn.size
-        p = self.m._poles(wn, z)
-        dp = np.concatenate([p, z * wn * (-1.0 - 1j * z / np.sqrt(1.0 - z**2))])
-        k = np.concatenate([np.arange(n), np.arange(n)])
-        pairs = np.stack([2 * k, 2 * k + 1], axis=1)
-        J = np.empty(self.Y.shape + (2 * n,))
-        for g, sh in zip(self.groups, self.shifts):
-            Phi, norm = self._design(p, sh)
-            pg = np.concatenate([p, p]) - sh
-            s2 = ((self.s + sh) ** 2)[None, :]
-            da = s2 / (self.s[None, :] - pg[:, None]) ** 2 * dp[:, None]
-            db = s2 / (self.s[None, :] - np.conj(pg)[:, None]) ** 2 * np.conj(dp)[:, None]
-            d = np.stack([da + db, 1j * (da - db)], axis=2)
-            dPhi = np.concatenate([d.real, d.imag], axis=1) / norm[pairs][:, None, :]
-            E, B, solve = self.m._ls_fit(Phi, self.Y[:, g])
-            if solve is None:
-                raise np.linalg.LinAlgError("rank-deficient design")
-            J[:, g, :] = self.m._projected_jacobian(Phi, dPhi, pairs, E, B, solve)
-        return J.reshape(-1, 2 * n)
-
-    def coefficients(self, wn, z) -> np.ndarray:
-        """(L, O) coefficients in the columns' own units."""
-        p = self.m._poles(wn, z)
-        B = np.empty((2 * wn.size + len(self.terms), self.Y.shape[1]))
-        for g, sh in zip(self.groups, self.shifts):
-            Phi, norm = self._design(p, sh)
-            B[:, g] = np.linalg.lstsq(Phi, self.Y[:, g], rcond=None)[0] / norm[:, None]
-        return B / self.scale[None, :]
-
-
-@dataclass(frozen=True)
-class _Fit:
-    modes: list
-    residuals: dict
-    nrmse: float
-
-
-def _solve_shared(prob: _Shared, init, band, *, uncertainty=True, max_nfev=200, tol=1e-10) -> _Fit:
-    import scipy.optimize
-
-    from guidefit import modes as modes_mod
-
-    wn0 = 2 * np.pi * np.array([a for a, _ in init])
-    z0 = np.array([b for _, b in init])
-    n = wn0.size
-    bw = (2 * np.pi * 0.5 * band[0], 2 * np.pi * 2.0 * band[1])
-    lo = np.concatenate([np.full(n, math.log(bw[0])), np.full(n, math.log(1e-5))])
-    hi = np.concatenate([np.full(n, math.log(bw[1])), np.full(n, math.log(0.7))])
-    x0 = np.clip(np.concatenate([np.log(wn0), np.log(np.clip(z0, 1e-5, 0.7))]), lo + 1e-12, hi - 1e-12)
-
-    def split(x):
-        return np.exp(x[:n]), np.exp(x[n:])
-
-    res = scipy.optimize.least_squares(lambda x: prob.residual(*split(x)), x0, jac=lambda x: prob.jacobian(*split(x)),
-                                       bounds=(lo, hi), method="trf", max_nfev=max_nfev,
-                                       xtol=tol, ftol=tol, gtol=tol)
-    wn, z = split(res.x)
-    order = np.argsort(wn)
-    wn, z = wn[order], z[order]
-    B = prob.coefficients(wn, z)
-    cost = float(np.sum(res.fun**2))
-    std_wn = std_z = np.full(n, np.nan)
-    if uncertainty:
-        J = prob.jacobian(wn, z)
-        dof = J.shape[0] - 2 * n - B.size
-        if dof > 0:
-            cov = np.linalg.pinv(J.T @ J) * cost / dof  # d ln wn, d ln zeta
-            sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
-            std_wn, std_z = sd[:n] * wn, sd[n:] * z
-    modes = [modes_mod.Mode(float(wn[k] / (2 * np.pi)), float(z[k]), B[2 * k] + 1j * B[2 * k + 1], "global_fit",
-                            float(std_wn[k] / (2 * np.pi)), float(std_z[k])) for k in range(n)]
-    resid = {t: B[2 * n + j].copy() for j, t in enumerate(prob.terms)}
-    return _Fit(modes, resid, math.sqrt(cost / float(np.sum(prob.Y**2))))
-
-
-def _gauss_newton(prob: _Shared, band, init, iterations: int = 4):
-    """A few Gauss-Newton steps (step halved while the cost rises) of the shared-pole problem from
-    ``init``; for refits that start next to the answer (per-run estimates, selection alternatives).
-    Returns a :class:`_Fit` with the fit's standard errors, or None when a pole leaves the band."""
-    from guidefit import modes as modes_mod
-
-    x = np.concatenate([np.log(2 * np.pi * np.array([a for a, _ in init])), np.log([b for _, b in init])])
-    n = len(init)
-
-    def split(v):
-        return np.exp(v[:n]), np.clip(np.exp(v[n:]), 1e-6, 0.69)
-
-    r = prob.residual(*split(x))
-    cost = float(r @ r)
-    for _ in range(iterations):
-        J = prob.jacobian(*split(x))
-        dx = -np.linalg.lstsq(J, r, rcond=None)[0]
-        step = 1.0
-        while step > 1e-3:
-            trial = x + step * dx
-            rt = prob.residual(*split(trial))
-            if float(rt @ rt) <= cost:
-                break
-            step /= 2
-        else:
-            break
-        done = np.max(np.abs(step * dx)) < 1e-10
-        x, r, cost = trial, rt, float(rt @ rt)
-        if done:
-            break
-    wn, z = split(x)
-    B = prob.coefficients(wn, z)
-    J = prob.jacobian(wn, z)
-    dof = J.shape[0] - 2 * n - B.size
-    sd = np.sqrt(np.maximum(np.diag(np.linalg.pinv(J.T @ J)) * cost / max(dof, 1), 0.0))
-    modes = [modes_mod.Mode(float(wn[k] / (2 * np.pi)), float(z[k]), B[2 * k] + 1j * B[2 * k + 1], "global_fit",
-                            float(sd[k] * wn[k] / (2 * np.pi)), float(sd[n + k] * z[k])) for k in range(n)]
-    if any(modes_mod._suspicious(m, *band) for m in modes):
-        return None
-    order = np.argsort([m.frequency_hz for m in modes])
-    return _Fit([modes[k] for k in order], {t: B[2 * n + j].copy() for j, t in enumerate(prob.terms)},
-                math.sqrt(cost / float(np.sum(prob.Y**2))))
+# the variable-projection problem and its solvers (guidefit.globalvp)
+_Shared = SharedProblem
+_Fit = Fit
+_solve_shared = solve
+_gauss_newton = gauss_newton
 
 
 def _refine(prob: _Shared, band, init, *, uncertainty=True, max_nfev=200, tol=1e-10):
@@ -715,39 +555,50 @@ def _jackknife(frfs: list, band, modes, prob: _Shared) -> list:
     Jacobian of the full data, r the projected residuals): removing one group
     of hits moves the optimum little, and the linearised step reproduced the
     full refits of the replicates to about 1 % of their scatter on the
-    simulated test matrix, at 1/8 of their cost.
+    simulated test matrix, at 1/8 of their cost. The residual change is
+    linear in the data, ``r_g - r_0 = (I - P)(Y_g - Y_0)``, so every
+    replicate's step comes from one product with the projected derivatives
+    (:meth:`guidefit.globalvp.SharedProblem.gradient_of`).
     """
     n_groups = max((getattr(x, "n_groups", 0) for x in frfs), default=0)
     if n_groups < 3 or not modes:
         return [(None, None)] * len(modes)
-    banded = [_in_band(x, *band) for x in frfs]
-    subs = [list(x.leave_one_group_out()) if x.n_groups >= 2 else [] for x in banded]
     wn = 2 * np.pi * np.array([m.frequency_hz for m in modes])
     z = np.array([m.damping_ratio for m in modes])
     try:
-        pinv = np.linalg.pinv(prob.jacobian(wn, z))
+        JtJ = prob.normal(wn, z)[0]
+        pinv = np.linalg.pinv(JtJ)
     except np.linalg.LinAlgError:
         return [(None, None)] * len(modes)
-    r0 = prob.residual(wn, z)
+    # replicate FRFs of every run, (G, F_band, R): runs with fewer groups keep all hits beyond their count
+    reps = np.concatenate([_replicates(x, band, n_groups) for x in frfs], axis=2)
+    dY = np.concatenate([reps.real, reps.imag], axis=1) * prob.scale - prob.Y[None]  # (G, 2F, O)
+    dY = dY.transpose(1, 2, 0)  # (2F, O, G)
+    dx = -pinv @ prob.gradient_of(wn, z, [dY[:, g] for g in prob.groups])  # (2n, G)
     n = len(modes)
-    fk = [[] for _ in modes]
-    zk = [[] for _ in modes]
-    for g in range(n_groups):
-        H = np.hstack([(s[g] if g < len(s) else x).H for s, x in zip(subs, banded)])
-        rg = _Shared(banded[0].frequency_hz, H, prob.groups, prob.shifts, prob.terms, prob.scale).residual(wn, z)
-        dx = -pinv @ (rg - r0)
-        for k in range(n):
-            fk[k].append(modes[k].frequency_hz * math.exp(dx[k]))
-            zk[k].append(modes[k].damping_ratio * math.exp(dx[n + k]))
     out = []
-    for a, b in zip(fk, zk):
-        n = len(a)
-        if n < 3:
-            out.append((None, None))
-            continue
-        a, b = np.array(a), np.array(b)
-        out.append((math.sqrt((n - 1) / n * np.sum((a - a.mean()) ** 2)),
-                    math.sqrt((n - 1) / n * np.sum((b - b.mean()) ** 2))))
+    for k in range(n):
+        a = modes[k].frequency_hz * np.exp(dx[k])
+        b = modes[k].damping_ratio * np.exp(dx[n + k])
+        out.append((math.sqrt((n_groups - 1) / n_groups * np.sum((a - a.mean()) ** 2)),
+                    math.sqrt((n_groups - 1) / n_groups * np.sum((b - b.mean()) ** 2))))
+    return out
+
+
+def _replicates(frf, band, n_groups: int) -> np.ndarray:
+    """(n_groups, F_band, R) FRFs of ``frf`` in the band without each hit group in turn (the FrfSet's
+    ``leave_one_group_out`` on the band's bins, all groups at once); the FRF of all hits for the
+    replicates beyond the run's own groups (or all of them when it has fewer than 2)."""
+    from guidefit.frf import estimate_frf
+
+    sel = (frf.frequency_hz >= band[0]) & (frf.frequency_hz <= band[1])
+    H = np.asarray(frf.H)[sel]
+    G = getattr(frf, "n_groups", 0) or 0
+    out = np.broadcast_to(H, (n_groups,) + H.shape).copy()
+    if G >= 2:
+        gs = {k: np.asarray(frf.group_sums[k])[:, sel] for k in ("Sff", "Sxx", "Sfx")}
+        sub = {k: np.sum(v, axis=0)[None] - v for k, v in gs.items()}
+        out[:G] = estimate_frf(sub["Sff"], sub["Sxx"], sub["Sfx"], frf.estimator)
     return out
 
 
@@ -793,15 +644,14 @@ def _conservative_std(prob: _Shared, modes: list) -> list:
     wn = 2 * np.pi * np.array([m.frequency_hz for m in modes])
     z = np.array([m.damping_ratio for m in modes])
     try:
-        J = prob.jacobian(wn, z)
+        JtJ, _, cost = prob.normal(wn, z)
     except np.linalg.LinAlgError:
         return modes
-    r = prob.residual(wn, z)
     n = len(modes)
-    dof = J.shape[0] - 2 * n - (2 * n + len(prob.terms)) * prob.Y.shape[1]
+    dof = prob.Y.size - 2 * n - (2 * n + len(prob.terms)) * prob.Y.shape[1]
     if dof <= 0:
         return modes
-    sd = np.sqrt(np.maximum(np.diag(np.linalg.pinv(J.T @ J)) * float(r @ r) / dof, 0.0))
+    sd = np.sqrt(np.maximum(np.diag(np.linalg.pinv(JtJ)) * cost / dof, 0.0))
     out = []
     for k, m in enumerate(modes):
         sf, sz = sd[k] * m.frequency_hz, sd[n + k] * m.damping_ratio
