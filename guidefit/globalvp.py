@@ -123,20 +123,29 @@ class SharedProblem:
         return float(sum(np.sum(fit["E"] ** 2) for fit in self.fits(wn, z)))
 
     def _derivatives(self, wn, z, sh, norm):
-        """d (design column pair) / d (ln w_n, ln zeta), stacked and scaled like the design: (2F, 2n, 2)."""
+        """d (design column pair) / d (ln w_n, ln zeta), stacked and scaled like the design: ``(2F, 4n)``,
+        column ``2j + c`` the derivative of column ``c`` of the pair that parameter ``j`` moves; and the
+        pairs ``(2n, 2)``."""
         n = wn.size
+        F = self.s.size
         p = modes_mod._poles(wn, z)
         dp = np.concatenate([p, z * wn * (-1.0 - 1j * z / np.sqrt(1.0 - z**2))])
         k = np.concatenate([np.arange(n), np.arange(n)])
         pairs = np.stack([2 * k, 2 * k + 1], axis=1)
         pg = p - sh
-        q = ((self.s + sh) ** 2)[None, :] / (self.s[None, :] - pg[:, None]) ** 2  # (n, F), each pole once
-        qc = ((self.s + sh) ** 2)[None, :] / (self.s[None, :] - np.conj(pg)[:, None]) ** 2
+        s2 = ((self.s + sh) ** 2)[None, :]
+        q = s2 / (self.s[None, :] - pg[:, None]) ** 2  # (n, F): each pole once, for both of its parameters
+        qc = s2 / (self.s[None, :] - np.conj(pg)[:, None]) ** 2
         da = np.concatenate([q, q]) * dp[:, None]
         db = np.concatenate([qc, qc]) * np.conj(dp)[:, None]
-        d = np.stack([da + db, 1j * (da - db)], axis=2)  # (2n, F, 2)
-        dPhi = np.concatenate([d.real, d.imag], axis=1) / norm[pairs][:, None, :]  # (2n, 2F, 2)
-        return dPhi, pairs
+        plus, minus = (da + db).T, (da - db).T  # columns a + b and j (a - b) = j minus
+        dA = np.empty((2 * F, 4 * n))
+        n0, n1 = norm[pairs[:, 0]], norm[pairs[:, 1]]
+        dA[:F, 0::2] = plus.real / n0
+        dA[F:, 0::2] = plus.imag / n0
+        dA[:F, 1::2] = -minus.imag / n1  # Re(j x) = -Im x
+        dA[F:, 1::2] = minus.real / n1  # Im(j x) = Re x
+        return dA, pairs
 
     def jacobian(self, wn, z) -> np.ndarray:
         """Exact projected Jacobian d residual / d (ln w_n, ln zeta), ``(2F O, 2n)`` (Golub-Pereyra, as in
@@ -146,7 +155,8 @@ class SharedProblem:
         for g, sh, fit in zip(self.groups, self.shifts, self.fits(wn, z)):
             if fit["solve"] is None:
                 raise np.linalg.LinAlgError("rank-deficient design")
-            dPhi, pairs = self._derivatives(wn, z, sh, fit["norm"])
+            dA, pairs = self._derivatives(wn, z, sh, fit["norm"])
+            dPhi = dA.reshape(dA.shape[0], 2 * n, 2).transpose(1, 0, 2)  # (2n, 2F, 2)
             J[:, g, :] = modes_mod._projected_jacobian(fit["Phi"], dPhi, pairs, fit["E"], fit["B"], fit["solve"])
         return J.reshape(-1, 2 * n)
 
@@ -159,13 +169,15 @@ class SharedProblem:
             if fit["solve"] is None:
                 raise np.linalg.LinAlgError("rank-deficient design")
             if "dperp" not in fit:
-                dPhi, pairs = self._derivatives(wn, z, sh, fit["norm"])
-                dA = dPhi.transpose(1, 0, 2).reshape(dPhi.shape[1], 4 * n)  # column 2j + c: parameter j, column c
-                fit["dperp"] = modes_mod._ls_fit(fit["Phi"], dA)[0]  # (I - P) dA
+                A, solve = fit["Phi"], fit["solve"]
+                dA, pairs = self._derivatives(wn, z, sh, fit["norm"])
+                # (I - P) dA: the least-squares fit of guidefit.modes._ls_fit with the design's own factor
+                coef = solve(A.T @ dA)
+                coef += solve(A.T @ (dA - A @ coef))
+                fit["dperp"] = dA - A @ coef
                 fit["Fj"] = (dA.T @ fit["E"]).reshape(2 * n, 2, -1)  # dA_j^T E
                 fit["Bj"] = fit["B"][pairs]  # (2n, 2, R)
-                L = fit["B"].shape[0]
-                ginv = fit["solve"](np.eye(L))
+                ginv = solve(np.eye(A.shape[1]))
                 fit["Ginv"] = ginv[pairs[:, :, None, None], pairs[None, None, :, :]]  # (2n, 2, 2n, 2)
             Bj, Fj, dperp = fit["Bj"], fit["Fj"], fit["dperp"]
             D = (dperp.T @ dperp).reshape(2 * n, 2, 2 * n, 2)

@@ -919,15 +919,38 @@ def _ls_solver(A: np.ndarray):
     """``V -> (A^T A)^-1 V`` by a Cholesky factor of the normal matrix, or ``None``.
 
     ``None`` when ``A^T A`` is not numerically positive definite (rank-deficient
-    ``A``); callers then fall back to an SVD solve.
+    ``A``); callers then fall back to an SVD solve. LAPACK's ``potrf`` and
+    ``potrs`` are called directly: they are what ``scipy.linalg.cho_factor``
+    and ``cho_solve`` run (same arguments, same numbers), without their
+    argument checks, which cost as much as the factorisation of these small
+    matrices (the global fit factorises a few hundred of them).
     """
-    import scipy.linalg
-
-    try:
-        factor = scipy.linalg.cho_factor(A.T @ A, check_finite=False)
-    except np.linalg.LinAlgError:
+    potrf, potrs = _cholesky_lapack()
+    factor, info = potrf(A.T @ A, lower=False, overwrite_a=False, clean=False)
+    if info > 0:
         return None
-    return lambda V: scipy.linalg.cho_solve(factor, V, check_finite=False)
+    if info < 0:  # pragma: no cover - a malformed argument
+        raise ValueError(f"illegal value in argument {-info} of LAPACK potrf")
+
+    def solve(V):
+        x, info = potrs(factor, V, lower=False, overwrite_b=False)
+        if info != 0:  # pragma: no cover - a malformed argument
+            raise ValueError(f"illegal value in argument {-info} of LAPACK potrs")
+        return x
+
+    return solve
+
+
+_LAPACK: list = []
+
+
+def _cholesky_lapack():
+    """LAPACK ``dpotrf`` and ``dpotrs`` (scipy.linalg.lapack), looked up once."""
+    if not _LAPACK:
+        from scipy.linalg import lapack
+
+        _LAPACK.extend([lapack.dpotrf, lapack.dpotrs])
+    return _LAPACK[0], _LAPACK[1]
 
 
 def _ls_fit(A: np.ndarray, Y: np.ndarray):
