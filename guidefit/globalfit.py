@@ -224,15 +224,26 @@ def _lscf_poles(R, S, T, n: int, m: int, ts: float) -> np.ndarray:
     return np.log(z) / ts
 
 
-def _participation(f: np.ndarray, H: np.ndarray, poles: np.ndarray) -> np.ndarray:
-    """(n, O) complex modal constants of each pole in every FRF by linear least squares (LSFD)."""
+def _participation(f: np.ndarray, H: np.ndarray, poles: np.ndarray, Y: np.ndarray | None = None) -> np.ndarray:
+    """(n, O) complex modal constants of each pole in every FRF by linear least squares (LSFD).
+
+    ``Y``: ``H`` stacked (real rows over imaginary), when the caller has it (one per diagram, not per order).
+    """
     from guidefit import modes as modes_mod
 
     s = 2j * np.pi * f
     A = modes_mod._stack(modes_mod._basis(s, poles, modes_mod._DEFAULT_RESIDUALS))
     norm = np.sqrt(np.sum(A**2, axis=0))
     norm[norm == 0] = 1.0
-    B = modes_mod._ls_fit(A / norm, modes_mod._stack(H))[1] / norm[:, None]
+    A = A / norm
+    Y = modes_mod._stack(H) if Y is None else Y
+    solve = modes_mod._ls_solver(A)
+    if solve is not None:  # modes._ls_fit's coefficients (its residual is not needed here)
+        B = solve(A.T @ Y)
+        B += solve(A.T @ (Y - A @ B))
+    if solve is None or not np.all(np.isfinite(B)):
+        B = modes_mod._ls_fit(A, Y)[1]
+    B = B / norm[:, None]
     res = B[0 : 2 * poles.size : 2] + 1j * B[1 : 2 * poles.size : 2]  # (n, O)
     return 2j * poles.imag[:, None] * res
 
@@ -282,6 +293,7 @@ def lscf_stabilisation(frequency_hz, H, orders: Sequence[int] = range(4, 49, 2),
     orders = [n for n in orders if 2 * n * m + 4 <= f.size] or orders[:1]
     rms = np.sqrt(np.mean(np.abs(Hf) ** 2, axis=0))
     Hn = Hf / np.where(rms > 0, rms, 1.0)
+    Yn = np.concatenate([Hn.real, Hn.imag], axis=0)  # stacked once for the participation of every order
     rms3 = np.sqrt(np.mean(np.abs(H3) ** 2, axis=(0, 2)))
     H3n = H3 / np.where(rms3 > 0, rms3, 1.0)[None, :, None]
     ts = 1.0 / (2.0 * hi * 1.05)
@@ -295,17 +307,17 @@ def lscf_stabilisation(frequency_hz, H, orders: Sequence[int] = range(4, 49, 2),
         fn = wn / (2 * np.pi)
         keep = (p.imag > 0) & (zeta > 0) & (zeta < MAX_DAMPING) & (fn > lo) & (fn < hi)
         p, fn, zeta = p[keep], fn[keep], zeta[keep]
-        part = _participation(f, Hn, p) if p.size else np.zeros((0, Hn.shape[1]), complex)
+        part = _participation(f, Hn, p, Yn) if p.size else np.zeros((0, Hn.shape[1]), complex)
         sf = np.zeros(p.size, bool)
         sz = np.zeros(p.size, bool)
         sv = np.zeros(p.size, bool)
-        if prev is not None and prev[0].size:
+        if prev is not None and prev[0].size and p.size:
             pf, pz, pv = prev
-            for i in range(p.size):
-                j = int(np.argmin(np.abs(np.log(pf / fn[i]))))
-                sf[i] = abs(pf[j] / fn[i] - 1) < STABLE_FREQUENCY
-                sz[i] = sf[i] and abs(pz[j] / zeta[i] - 1) < STABLE_DAMPING
-                sv[i] = sf[i] and _mac(part[i], pv[j]) >= STABLE_MAC
+            j = np.argmin(np.abs(np.log(pf[None, :] / fn[:, None])), axis=1)  # nearest pole of the previous order
+            sf = np.abs(pf[j] / fn - 1) < STABLE_FREQUENCY
+            sz = sf & (np.abs(pz[j] / zeta - 1) < STABLE_DAMPING)
+            for i in np.flatnonzero(sf):
+                sv[i] = _mac(part[i], pv[j[i]]) >= STABLE_MAC
         prev = (fn, zeta, part)
         rows.append((np.full(p.size, n * m), fn, zeta, part, sf, sz, sv))
     cat = [np.concatenate([r[k] for r in rows]) for k in range(7)]
