@@ -54,6 +54,19 @@ def test_normal_equations_equal_those_of_the_full_jacobian():
     assert cost == pytest.approx(float(r @ r), rel=1e-12)
 
 
+def test_explicit_projection_of_derivatives_near_the_design_span_gives_the_same_normal_equations(monkeypatch):
+    """The fallback of SharedProblem._project (columns projected one by one) agrees with the Gram form and
+    with the full Jacobian."""
+    prob, wn, z = _problem()
+    gram = prob.normal(wn, z)[0]
+    monkeypatch.setattr(globalvp, "EXPLICIT_PROJECTION", 2.0)  # every column "nearly in the span"
+    prob._key = None
+    explicit = prob.normal(wn, z)[0]
+    J = prob.jacobian(wn, z)
+    np.testing.assert_allclose(explicit, J.T @ J, rtol=1e-9, atol=1e-9 * np.abs(J.T @ J).max())
+    np.testing.assert_allclose(gram, explicit, rtol=1e-9, atol=1e-9 * np.abs(explicit).max())
+
+
 def test_compressed_problem_has_the_full_problems_normal_equations():
     prob, wn, z = _problem()
     JtJ, g, cost = prob.normal(wn, z)
