@@ -91,15 +91,42 @@ class SharedProblem:
         self.shifts = [float(x) for x in shifts]  # sigma_w (1/s) per group
         self._key = None
         self._fits: list = []
+        self._terms: dict = {}
 
     def _design(self, p, shift):
+        """Unit-norm design ``(2F, L)`` at the poles ``p`` for a group's window shift, and the column norms.
+
+        The values of ``guidefit.modes._stack(guidefit.modes._basis(s + shift, p, terms))`` (the same
+        element-wise operations, written into one array; the residual-term columns, which do not
+        depend on the poles, made once per shift).
+        """
         # exponential window e^{-t/tau} on force and response: H_w(s) = H(s + 1/tau) exactly (Laplace shift), so the
         # whole basis (the s^2 of the accelerance and the residual terms too) is evaluated at s + 1/tau with the true
         # poles; only moving the poles (s^2 / (s - p + 1/tau)) biased a 2 kHz mode by -0.0024 % at tau = 0.05 s
-        Phi = modes_mod._stack(modes_mod._basis(self.s + shift, p, self.terms))
+        sg, s2, terms = self._shifted(shift)
+        F, n = sg.size, p.size
+        a = s2[:, None] / (sg[:, None] - p[None, :])
+        b = s2[:, None] / (sg[:, None] - np.conj(p)[None, :])
+        plus, minus = a + b, a - b
+        Phi = np.empty((2 * F, 2 * n + terms.shape[1]))
+        Phi[:F, 0:2 * n:2] = plus.real
+        Phi[F:, 0:2 * n:2] = plus.imag
+        Phi[:F, 1:2 * n:2] = -minus.imag  # j (a - b): real part -Im, imaginary part Re
+        Phi[F:, 1:2 * n:2] = minus.real
+        Phi[:, 2 * n:] = terms
         norm = np.sqrt(np.sum(Phi**2, axis=0))
         norm[norm == 0] = 1.0
-        return Phi / norm, norm
+        Phi /= norm
+        return Phi, norm
+
+    def _shifted(self, shift):
+        """``s + shift``, its square and the stacked residual-term columns, made once per shift."""
+        if shift not in self._terms:
+            sg = self.s + shift
+            terms = np.stack([modes_mod._RESIDUAL_TERMS[t](sg) for t in self.terms], axis=1) if self.terms \
+                else np.zeros((sg.size, 0), complex)
+            self._terms[shift] = (sg, sg * sg, np.concatenate([terms.real, terms.imag], axis=0))
+        return self._terms[shift]
 
     def fits(self, wn, z) -> list:
         """Per group ``{"Phi", "norm", "E", "B", "solve"}`` of the least-squares fit at these poles (kept)."""
