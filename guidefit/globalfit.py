@@ -563,7 +563,7 @@ def _match(modes, reference) -> list:
     return out
 
 
-def _jackknife(frfs: list, band, modes, prob: _Shared) -> list:
+def _jackknife(frfs: list, band, modes, prob: _Shared, poles=None) -> list:
     """Delete-a-group jackknife std (f, zeta) of every mode over the hits of all runs together.
 
     Replicate g leaves group g out of every run (runs with fewer groups keep
@@ -581,8 +581,7 @@ def _jackknife(frfs: list, band, modes, prob: _Shared) -> list:
     n_groups = max((getattr(x, "n_groups", 0) for x in frfs), default=0)
     if n_groups < 3 or not modes:
         return [(None, None)] * len(modes)
-    wn = 2 * np.pi * np.array([m.frequency_hz for m in modes])
-    z = np.array([m.damping_ratio for m in modes])
+    wn, z = poles if poles is not None else _mode_poles(modes)
     try:
         JtJ = prob.normal(wn, z)[0]
         pinv = np.linalg.pinv(JtJ)
@@ -655,12 +654,20 @@ def _rss(*values) -> float | None:
     return math.sqrt(sum(v * v for v in vals)) if vals else None
 
 
-def _conservative_std(prob: _Shared, modes: list) -> list:
-    """``modes`` with each f and zeta std the larger of its own and that of ``prob`` at the same poles."""
+def _mode_poles(modes: list, fit=None) -> tuple[np.ndarray, np.ndarray]:
+    """(w_n rad/s, zeta) of ``modes``: the fit's own arrays when it has them for these modes (its problem
+    keeps its design and products there), else from the modes' frequencies and damping ratios."""
+    if fit is not None and getattr(fit, "wn", None) is not None and len(fit.modes) == len(modes):
+        return fit.wn, fit.zeta
+    return 2 * np.pi * np.array([m.frequency_hz for m in modes]), np.array([m.damping_ratio for m in modes])
+
+
+def _conservative_std(prob: _Shared, modes: list, poles=None) -> list:
+    """``modes`` with each f and zeta std the larger of its own and that of ``prob`` at the same poles
+    (``poles``: their (w_n, zeta) arrays, default from the modes)."""
     from dataclasses import replace
 
-    wn = 2 * np.pi * np.array([m.frequency_hz for m in modes])
-    z = np.array([m.damping_ratio for m in modes])
+    wn, z = poles if poles is not None else _mode_poles(modes)
     try:
         JtJ, _, cost = prob.normal(wn, z)
     except np.linalg.LinAlgError:
@@ -802,12 +809,15 @@ def _global_fit(frf_by_run, band_hz, orders, jackknife, selection_spread, weight
     if len(keep) < len(fit.modes) and keep:
         fit = _refine(prob, band, [(fit.modes[k].frequency_hz, fit.modes[k].damping_ratio) for k in keep]) or fit
     modes = list(fit.modes)
+    poles = _mode_poles(modes, fit)  # where prob keeps its design and products
     if prob.scale is not None and weighting == "noise":
         # the noise-weighted fit is the efficient estimate; its std assumes the model exact and the noise
         # known. The same poles' std in the equally weighted problem also carries the misfit of the weak
         # channels: the larger of the two is reported
-        modes = _conservative_std(_Shared(f, H, groups, shifts), modes)
-    jk = _jackknife(frfs, band, modes, prob) if jackknife else [(None, None)] * len(modes)
+        plain = _Shared(f, H, groups, shifts)
+        plain.share = prob  # the same design at the same poles
+        modes = _conservative_std(plain, modes, poles)
+    jk = _jackknife(frfs, band, modes, prob, poles) if jackknife else [(None, None)] * len(modes)
     thin = _Shared(f[::step], H[::step], groups, shifts) if step > 1 else prob  # a spread, not an estimate
     sp = _selection_spread(thin, band, modes, selection, diagram) if selection_spread else [(None, None)] * len(modes)
     from dataclasses import replace

@@ -48,7 +48,7 @@ Examples
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -57,6 +57,8 @@ from guidefit import modes as modes_mod
 #: a derivative column keeping less than this share of its squared norm outside the design's span is
 #: projected explicitly (:meth:`SharedProblem._project`)
 EXPLICIT_PROJECTION = 1e-4
+#: what a fit at given poles shares with another problem of the same design (SharedProblem.fits)
+_DESIGN_PARTS = ("Phi", "norm", "solve", "D", "dA", "GiC", "Ginv")
 #: relative rank cut-off of numpy.linalg.lstsq's default (machine epsilon times the larger dimension)
 _EPS = float(np.finfo(float).eps)
 
@@ -92,6 +94,7 @@ class SharedProblem:
         self._key = None
         self._fits: list = []
         self._terms: dict = {}
+        self.share: SharedProblem | None = None  # a problem whose design at the same poles may be reused
 
     def _design(self, p, shift):
         """Unit-norm design ``(2F, L)`` at the poles ``p`` for a group's window shift, and the column norms.
@@ -129,15 +132,26 @@ class SharedProblem:
         return self._terms[shift]
 
     def fits(self, wn, z) -> list:
-        """Per group ``{"Phi", "norm", "E", "B", "solve"}`` of the least-squares fit at these poles (kept)."""
+        """Per group ``{"Phi", "norm", "E", "B", "solve"}`` of the least-squares fit at these poles (kept).
+
+        When :attr:`share` (another problem on the same bins, groups and
+        shifts, e.g. the same FRFs weighted differently) holds a fit at the
+        same poles, its design, factor and derivative products are reused.
+        """
         key = (np.asarray(wn, float).tobytes(), np.asarray(z, float).tobytes())
         if key != self._key:
+            src = self.share if self.share is not None and self.share._key == key else None
             p = modes_mod._poles(wn, z)
             self._fits = []
-            for g, sh in zip(self.groups, self.shifts):
-                Phi, norm = self._design(p, sh)
-                E, B, solve = modes_mod._ls_fit(Phi, self.Y[:, g])
-                self._fits.append({"Phi": Phi, "norm": norm, "E": E, "B": B, "solve": solve})
+            for i, (g, sh) in enumerate(zip(self.groups, self.shifts)):
+                if src is None:
+                    Phi, norm = self._design(p, sh)
+                    E, B, solve = modes_mod._ls_fit(Phi, self.Y[:, g])
+                    fit = {"Phi": Phi, "norm": norm, "E": E, "B": B, "solve": solve}
+                else:
+                    fit = {k: v for k, v in src._fits[i].items() if k in _DESIGN_PARTS}
+                    fit["E"], fit["B"], fit["solve"] = modes_mod._ls_fit(fit["Phi"], self.Y[:, g], fit["solve"])
+                self._fits.append(fit)
             self._key = key
         return self._fits
 
@@ -198,7 +212,7 @@ class SharedProblem:
         for sh, fit in zip(self.shifts, self.fits(wn, z)):
             if fit["solve"] is None:
                 raise np.linalg.LinAlgError("rank-deficient design")
-            if "D" not in fit:
+            if "Bj" not in fit:
                 self._project(fit, wn, z, sh)
             Bj, Fj = fit["Bj"], fit["Fj"]
             JtJ += np.einsum("jar,jakb,kbr->jk", Bj, fit["D"], Bj)
@@ -215,30 +229,35 @@ class SharedProblem:
         column (four products with the design). It loses ``|dA_j|^2 / |(I - P)
         dA_j|^2`` in relative accuracy; the derivative columns keep about half
         their norm outside the design's span (0.45-0.67 on the benchmark
-        files, 1e-15 relative error in D), and a column below 1 % of its norm
-        is projected explicitly instead (guidefit.modes._ls_fit's fit with one
-        refinement step).
+        files, 1e-15 relative error in D), and a column below
+        :data:`EXPLICIT_PROJECTION` of it is projected explicitly instead
+        (guidefit.modes._ls_fit's fit with one refinement step).
         """
         n = wn.size
         A, solve = fit["Phi"], fit["solve"]
-        dA, pairs = self._derivatives(wn, z, sh, fit["norm"])
-        L, P4 = A.shape[1], dA.shape[1]
-        prods = dA.T @ np.hstack([A, dA, fit["E"]])  # (4n, L + 4n + R)
-        C = prods[:, :L].T  # A^T dA
-        GiC = solve(C)
-        DD = prods[:, L:L + P4]
-        D = DD - C.T @ GiC
-        if np.any(np.diag(D) < EXPLICIT_PROJECTION * np.diag(DD)):  # nearly in the design's span: project them
-            coef = solve(A.T @ dA)
-            coef += solve(A.T @ (dA - A @ coef))
-            dperp = dA - A @ coef
-            D = dperp.T @ dperp
-        fit["D"] = D.reshape(2 * n, 2, 2 * n, 2)
-        fit["dA"], fit["GiC"] = dA, GiC
-        fit["Fj"] = prods[:, L + P4:].reshape(2 * n, 2, -1)  # dA_j^T E
+        k = np.concatenate([np.arange(n), np.arange(n)])
+        pairs = np.stack([2 * k, 2 * k + 1], axis=1)
+        if "D" not in fit:  # the design's part (shared with problems of the same design)
+            dA, _ = self._derivatives(wn, z, sh, fit["norm"])
+            L, P4 = A.shape[1], dA.shape[1]
+            prods = dA.T @ np.hstack([A, dA, fit["E"]])  # (4n, L + 4n + R)
+            C = prods[:, :L].T  # A^T dA
+            GiC = solve(C)
+            DD = prods[:, L:L + P4]
+            D = DD - C.T @ GiC
+            if np.any(np.diag(D) < EXPLICIT_PROJECTION * np.diag(DD)):  # nearly in the design's span: project them
+                coef = solve(A.T @ dA)
+                coef += solve(A.T @ (dA - A @ coef))
+                dperp = dA - A @ coef
+                D = dperp.T @ dperp
+            fit["D"] = D.reshape(2 * n, 2, 2 * n, 2)
+            fit["dA"], fit["GiC"] = dA, GiC
+            fit["Fj"] = prods[:, L + P4:].reshape(2 * n, 2, -1)  # dA_j^T E
+            ginv = solve(np.eye(L))
+            fit["Ginv"] = ginv[pairs[:, :, None, None], pairs[None, None, :, :]]  # (2n, 2, 2n, 2)
+        elif "Fj" not in fit:
+            fit["Fj"] = (fit["dA"].T @ fit["E"]).reshape(2 * n, 2, -1)
         fit["Bj"] = fit["B"][pairs]  # (2n, 2, R)
-        ginv = solve(np.eye(L))
-        fit["Ginv"] = ginv[pairs[:, :, None, None], pairs[None, None, :, :]]  # (2n, 2, 2n, 2)
 
     def gradient_of(self, wn, z, dY: list) -> np.ndarray:
         """``J^T (I - P) D`` for changes ``D`` of the data: ``dY`` per group ``(2F, R_g, K)`` -> ``(2n, K)``
@@ -301,11 +320,14 @@ def compressed(JtJ: np.ndarray, g: np.ndarray, cost: float) -> tuple[np.ndarray,
 
 @dataclass(frozen=True)
 class Fit:
-    """Modes (sorted by frequency), residual-term coefficients per column, normalised RMS misfit."""
+    """Modes (sorted by frequency), residual-term coefficients per column, normalised RMS misfit; the
+    poles as fitted (``wn`` rad/s, ``zeta``, in the modes' order: the problem's kept fit is at them)."""
 
     modes: list
     residuals: dict
     nrmse: float
+    wn: np.ndarray | None = field(default=None, repr=False)
+    zeta: np.ndarray | None = field(default=None, repr=False)
 
 
 def _mode_list(prob, wn, z, B, std_wn, std_z) -> list:
@@ -354,7 +376,7 @@ def solve(prob: SharedProblem, init, band, *, uncertainty=True, max_nfev=200, to
             sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
             std_wn, std_z = sd[:n] * wn, sd[n:] * z
     resid = {t: B[2 * n + j].copy() for j, t in enumerate(prob.terms)}
-    return Fit(_mode_list(prob, wn, z, B, std_wn, std_z), resid, math.sqrt(cost / float(np.sum(prob.Y**2))))
+    return Fit(_mode_list(prob, wn, z, B, std_wn, std_z), resid, math.sqrt(cost / float(np.sum(prob.Y**2))), wn, z)
 
 
 def gauss_newton(prob: SharedProblem, band, init, iterations: int = 4) -> Fit | None:

@@ -953,11 +953,13 @@ def _cholesky_lapack():
     return _LAPACK[0], _LAPACK[1]
 
 
-def _ls_fit(A: np.ndarray, Y: np.ndarray):
+def _ls_fit(A: np.ndarray, Y: np.ndarray, solver=None):
     """Least-squares fit of Y by the columns of A (unit-norm columns).
 
     Normal equations with one step of iterative refinement: much cheaper
     than a QR for tall, narrow A, and as accurate while cond(A)^2 eps << 1.
+    ``solver``: the :func:`_ls_solver` of ``A`` when the caller has it (the
+    same design fitted to other data).
 
     Returns
     -------
@@ -966,7 +968,7 @@ def _ls_fit(A: np.ndarray, Y: np.ndarray):
         :func:`_ls_solver`; ``solve`` is ``None`` when A is rank deficient and the
         fit fell back to an SVD solve.
     """
-    solve = _ls_solver(A)
+    solve = solver or _ls_solver(A)
     if solve is not None:
         B = solve(A.T @ Y)
         B += solve(A.T @ (Y - A @ B))

@@ -176,3 +176,22 @@ def test_prominent_peaks_equal_scipy_on_long_curves_and_non_finite_values(seed):
     ref, props = scipy.signal.find_peaks(y, prominence=0.5)
     assert idx.tolist() == ref.tolist()
     np.testing.assert_array_equal(prom, props["prominences"])
+
+
+def test_problem_sharing_a_design_gives_its_own_data_fit():
+    """A problem that reuses another's design at the same poles (other column weights, as the global fit's
+    equally weighted check of the noise-weighted fit) has the residual and normal equations it would
+    have on its own."""
+    prob, wn, z = _problem()
+    prob.normal(wn, z)
+    H = (prob.Y[: prob.f.size] + 1j * prob.Y[prob.f.size:]) / prob.scale
+    weights = np.linspace(0.5, 2.0, H.shape[1]) / np.sqrt(np.mean(np.abs(H) ** 2, axis=0))
+    alone = globalvp.SharedProblem(prob.f, H, prob.groups, prob.shifts, scale=weights)
+    shared = globalvp.SharedProblem(prob.f, H, prob.groups, prob.shifts, scale=weights)
+    shared.share = prob
+    ref, got = alone.normal(wn, z), shared.normal(wn, z)
+    assert shared.fits(wn, z)[0]["Phi"] is prob.fits(wn, z)[0]["Phi"]  # the design was not made again
+    np.testing.assert_allclose(got[0], ref[0], rtol=1e-12, atol=1e-12 * np.abs(ref[0]).max())
+    np.testing.assert_allclose(got[1], ref[1], rtol=1e-9, atol=1e-12 * np.linalg.norm(ref[1]))
+    assert got[2] == pytest.approx(ref[2], rel=1e-13)
+    np.testing.assert_allclose(shared.residual(wn, z), alone.residual(wn, z), rtol=0, atol=1e-13)
