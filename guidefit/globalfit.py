@@ -230,19 +230,18 @@ def _lscf_poles(R, S, T, n: int, m: int, ts: float) -> np.ndarray:
     return np.log(z) / ts
 
 
-def _participation(f: np.ndarray, H: np.ndarray, poles: np.ndarray, Y: np.ndarray | None = None) -> np.ndarray:
+def _participation(f: np.ndarray, H: np.ndarray, poles: np.ndarray, problem: SharedProblem | None = None) -> np.ndarray:
     """(n, O) complex modal constants of each pole in every FRF by linear least squares (LSFD).
 
-    ``Y``: ``H`` stacked (real rows over imaginary), when the caller has it (one per diagram, not per order).
+    ``problem``: a :class:`guidefit.globalvp.SharedProblem` of ``(f, H)`` (unit scale, one group, no
+    shift) when the caller has one: its design (the same numbers as ``modes._basis``, residual-term
+    columns made once) and stacked ``H`` serve every order of a diagram.
     """
     from guidefit import modes as modes_mod
 
-    s = 2j * np.pi * f
-    A = modes_mod._stack(modes_mod._basis(s, poles, modes_mod._DEFAULT_RESIDUALS))
-    norm = np.sqrt(np.sum(A**2, axis=0))
-    norm[norm == 0] = 1.0
-    A = A / norm
-    Y = modes_mod._stack(H) if Y is None else Y
+    prob = problem or SharedProblem(f, H, [slice(None)], [0.0], scale=np.ones(np.shape(H)[1]))
+    A, norm = prob._design(np.asarray(poles), 0.0)
+    Y = prob.Y
     solve = modes_mod._ls_solver(A)
     if solve is not None:  # modes._ls_fit's coefficients (its residual is not needed here)
         B = solve(A.T @ Y)
@@ -299,7 +298,7 @@ def lscf_stabilisation(frequency_hz, H, orders: Sequence[int] = range(4, 49, 2),
     orders = [n for n in orders if 2 * n * m + 4 <= f.size] or orders[:1]
     rms = np.sqrt(np.mean(np.abs(Hf) ** 2, axis=0))
     Hn = Hf / np.where(rms > 0, rms, 1.0)
-    Yn = np.concatenate([Hn.real, Hn.imag], axis=0)  # stacked once for the participation of every order
+    lsfd = SharedProblem(f, Hn, [slice(None)], [0.0], scale=np.ones(Hn.shape[1]))  # the participation's design
     rms3 = np.sqrt(np.mean(np.abs(H3) ** 2, axis=(0, 2)))
     H3n = H3 / np.where(rms3 > 0, rms3, 1.0)[None, :, None]
     ts = 1.0 / (2.0 * hi * 1.05)
@@ -313,7 +312,7 @@ def lscf_stabilisation(frequency_hz, H, orders: Sequence[int] = range(4, 49, 2),
         fn = wn / (2 * np.pi)
         keep = (p.imag > 0) & (zeta > 0) & (zeta < MAX_DAMPING) & (fn > lo) & (fn < hi)
         p, fn, zeta = p[keep], fn[keep], zeta[keep]
-        part = _participation(f, Hn, p, Yn) if p.size else np.zeros((0, Hn.shape[1]), complex)
+        part = _participation(f, Hn, p, lsfd) if p.size else np.zeros((0, Hn.shape[1]), complex)
         sf = np.zeros(p.size, bool)
         sz = np.zeros(p.size, bool)
         sv = np.zeros(p.size, bool)
