@@ -29,7 +29,7 @@ channels of a recording together, in a band that holds every carriage mode:
    frequency enters the selection.
 3. :func:`global_fit` -- the selected poles start a variable-projection
    least-squares fit of poles and residues on all FRFs together
-   (:func:`guidefit.modes.fit_band`, exact Jacobian), with lower and upper
+   (:mod:`guidefit.globalvp`, exact normal equations), with lower and upper
    residual terms per FRF for the modes outside the band. Its uncertainty
    combines the fit's own standard error, the delete-a-group jackknife over
    hits of the whole global fit, and the spread over pole selection (the fit
