@@ -21,11 +21,11 @@ these are small products (:meth:`SharedProblem.normal`):
 * ``(J^T E)_j = -tr(B_j^T F_j)``;
 * ``(J^T (I - P) D)_j = -tr(B_j^T dA_j^T (I - P) D)``.
 
-The projection ``(I - P) dA`` is one least-squares fit of the ``4n``
-derivative columns (no cancellation), so no ``(2 F O, 2n)`` Jacobian is
-formed: on the 100-hit benchmark recording (3288 bins, 4 columns) this made
-a Jacobian 3x cheaper and removed the SVD of the full Jacobian that
-``scipy.optimize.least_squares`` ran at every iteration. The trust-region
+``dA^T (I - P) dA`` and ``dA^T E`` come from one product of the ``4n``
+derivative columns with ``[A, dA, E]`` (:meth:`SharedProblem._project`), so
+no ``(2 F O, 2n)`` Jacobian is formed, and ``scipy.optimize.least_squares``
+no longer takes the SVD of one at every iteration (26 304 x 8 on the 100-hit
+benchmark recording: 3288 bins, 4 columns, 4 modes). The trust-region
 iterations themselves are scipy's ("trf", bounds), given the equivalent
 small problem of :func:`compressed`: a residual of ``2n + 1`` entries with
 the same norm, gradient and normal matrix, so they are the same iterations
@@ -330,7 +330,7 @@ class Fit:
     zeta: np.ndarray | None = field(default=None, repr=False)
 
 
-def _mode_list(prob, wn, z, B, std_wn, std_z) -> list:
+def _mode_list(wn, z, B, std_wn, std_z) -> list:
     n = wn.size
     return [modes_mod.Mode(float(wn[k] / (2 * np.pi)), float(z[k]), B[2 * k] + 1j * B[2 * k + 1], "global_fit",
                            float(std_wn[k] / (2 * np.pi)), float(std_z[k])) for k in range(n)]
@@ -376,7 +376,7 @@ def solve(prob: SharedProblem, init, band, *, uncertainty=True, max_nfev=200, to
             sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
             std_wn, std_z = sd[:n] * wn, sd[n:] * z
     resid = {t: B[2 * n + j].copy() for j, t in enumerate(prob.terms)}
-    return Fit(_mode_list(prob, wn, z, B, std_wn, std_z), resid, math.sqrt(cost / float(np.sum(prob.Y**2))), wn, z)
+    return Fit(_mode_list(wn, z, B, std_wn, std_z), resid, math.sqrt(cost / float(np.sum(prob.Y**2))), wn, z)
 
 
 def gauss_newton(prob: SharedProblem, band, init, iterations: int = 4) -> Fit | None:
@@ -412,7 +412,7 @@ def gauss_newton(prob: SharedProblem, band, init, iterations: int = 4) -> Fit | 
     JtJ = prob.normal(wn, z)[0]
     dof = prob.Y.size - 2 * n - B.size
     sd = np.sqrt(np.maximum(np.diag(np.linalg.pinv(JtJ)) * cost / max(dof, 1), 0.0))
-    modes = _mode_list(prob, wn, z, B, sd[:n] * wn, sd[n:] * z)
+    modes = _mode_list(wn, z, B, sd[:n] * wn, sd[n:] * z)
     if any(modes_mod._suspicious(m, *band) for m in modes):
         return None
     order = np.argsort([m.frequency_hz for m in modes])
