@@ -29,7 +29,7 @@ channels of a recording together, in a band that holds every carriage mode:
    frequency enters the selection.
 3. :func:`global_fit` -- the selected poles start a variable-projection
    least-squares fit of poles and residues on all FRFs together
-   (:func:`guidefit.modes.fit_band`, exact Jacobian), with lower and upper
+   (:mod:`guidefit.globalvp`, exact normal equations), with lower and upper
    residual terms per FRF for the modes outside the band. Its uncertainty
    combines the fit's own standard error, the delete-a-group jackknife over
    hits of the whole global fit, and the spread over pole selection (the fit
@@ -63,6 +63,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from guidefit.errors import IdentificationError
+from guidefit.globalvp import Fit, SharedProblem, gauss_newton, solve
 
 #: stability limits between consecutive orders: frequency, damping (relative), participation MAC
 STABLE_FREQUENCY = 0.01
@@ -140,12 +141,35 @@ def one_blas_thread():
     machine each call waits for that thread to be scheduled. On the 20-hit,
     0.5 s benchmark recording (bench_identify_e2e.py) this made the global
     fit 7x slower (1.9 s against 0.26 s); the results are the same.
+
+    The controller is built once per process (:func:`_blas_controller`):
+    ``threadpoolctl.threadpool_limits`` scans every loaded library on each
+    call, 1-10 ms, more than some of the fits it guards.
     """
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover - threadpoolctl is a dependency
+    controller = _blas_controller()
+    if controller is None:  # pragma: no cover - threadpoolctl is a dependency
         return contextlib.nullcontext()
-    return threadpool_limits(limits=1, user_api="blas")
+    return controller.limit(limits=1, user_api="blas")
+
+
+_CONTROLLER: list = []
+
+
+def _blas_controller():
+    """The process's threadpoolctl controller (None without threadpoolctl), made on first use.
+
+    scipy.linalg is imported first so that its own BLAS (a second OpenBLAS
+    in the wheels) is loaded when the libraries are scanned, and limited too.
+    """
+    if not _CONTROLLER:
+        try:
+            import scipy.linalg  # noqa: F401  (loads scipy's BLAS before the scan)
+            from threadpoolctl import ThreadpoolController
+        except ImportError:  # pragma: no cover - threadpoolctl is a dependency
+            _CONTROLLER.append(None)
+        else:
+            _CONTROLLER.append(ThreadpoolController())
+    return _CONTROLLER[0]
 
 
 def _mac(a: np.ndarray, b: np.ndarray) -> float:
@@ -172,12 +196,18 @@ def _reduced_matrices(f: np.ndarray, H3: np.ndarray, n_max: int, ts: float):
 
 def _lscf_poles(R, S, T, n: int, m: int, ts: float) -> np.ndarray:
     """Poles (rad/s) of the right matrix-fraction denominator of order n (highest coefficient I_m)."""
-    import scipy.linalg
+    from guidefit.modes import _cholesky_lapack
 
     k = n + 1
     c = k * m
     Rn, Sn, Tn = R[:k, :k], S[:, :k, :c], T[:c, :c]
-    RinvS = scipy.linalg.solve(Rn, Sn.transpose(1, 0, 2).reshape(k, -1), assume_a="pos")
+    # scipy.linalg.solve(Rn, ., assume_a="pos") is LAPACK potrf + potrs (the same numbers); called directly,
+    # without its checks and condition estimate (a third of this function's time over 23 orders)
+    potrf, potrs = _cholesky_lapack()
+    factor, info = potrf(Rn, lower=False, clean=False)
+    if info != 0:
+        raise np.linalg.LinAlgError(f"LSCF: the order-{n} basis Gram matrix is not positive definite")
+    RinvS = potrs(factor, Sn.transpose(1, 0, 2).reshape(k, -1), lower=False)[0]
     RinvS = RinvS.reshape(k, S.shape[0], c).transpose(1, 0, 2)
     M = Tn - np.einsum("oji,ojk->ik", Sn, RinvS)
     if not np.all(np.isfinite(M)):
@@ -200,15 +230,25 @@ def _lscf_poles(R, S, T, n: int, m: int, ts: float) -> np.ndarray:
     return np.log(z) / ts
 
 
-def _participation(f: np.ndarray, H: np.ndarray, poles: np.ndarray) -> np.ndarray:
-    """(n, O) complex modal constants of each pole in every FRF by linear least squares (LSFD)."""
+def _participation(f: np.ndarray, H: np.ndarray, poles: np.ndarray, problem: SharedProblem | None = None) -> np.ndarray:
+    """(n, O) complex modal constants of each pole in every FRF by linear least squares (LSFD).
+
+    ``problem``: a :class:`guidefit.globalvp.SharedProblem` of ``(f, H)`` (unit scale, one group, no
+    shift) when the caller has one: its design (the same numbers as ``modes._basis``, residual-term
+    columns made once) and stacked ``H`` serve every order of a diagram.
+    """
     from guidefit import modes as modes_mod
 
-    s = 2j * np.pi * f
-    A = modes_mod._stack(modes_mod._basis(s, poles, modes_mod._DEFAULT_RESIDUALS))
-    norm = np.sqrt(np.sum(A**2, axis=0))
-    norm[norm == 0] = 1.0
-    B = modes_mod._ls_fit(A / norm, modes_mod._stack(H))[1] / norm[:, None]
+    prob = problem or SharedProblem(f, H, [slice(None)], [0.0], scale=np.ones(np.shape(H)[1]))
+    A, norm = prob._design(np.asarray(poles), 0.0)
+    Y = prob.Y
+    solve = modes_mod._ls_solver(A)
+    if solve is not None:  # modes._ls_fit's coefficients (its residual is not needed here)
+        B = solve(A.T @ Y)
+        B += solve(A.T @ (Y - A @ B))
+    if solve is None or not np.all(np.isfinite(B)):
+        B = modes_mod._ls_fit(A, Y)[1]
+    B = B / norm[:, None]
     res = B[0 : 2 * poles.size : 2] + 1j * B[1 : 2 * poles.size : 2]  # (n, O)
     return 2j * poles.imag[:, None] * res
 
@@ -258,6 +298,7 @@ def lscf_stabilisation(frequency_hz, H, orders: Sequence[int] = range(4, 49, 2),
     orders = [n for n in orders if 2 * n * m + 4 <= f.size] or orders[:1]
     rms = np.sqrt(np.mean(np.abs(Hf) ** 2, axis=0))
     Hn = Hf / np.where(rms > 0, rms, 1.0)
+    lsfd = SharedProblem(f, Hn, [slice(None)], [0.0], scale=np.ones(Hn.shape[1]))  # the participation's design
     rms3 = np.sqrt(np.mean(np.abs(H3) ** 2, axis=(0, 2)))
     H3n = H3 / np.where(rms3 > 0, rms3, 1.0)[None, :, None]
     ts = 1.0 / (2.0 * hi * 1.05)
@@ -271,17 +312,17 @@ def lscf_stabilisation(frequency_hz, H, orders: Sequence[int] = range(4, 49, 2),
         fn = wn / (2 * np.pi)
         keep = (p.imag > 0) & (zeta > 0) & (zeta < MAX_DAMPING) & (fn > lo) & (fn < hi)
         p, fn, zeta = p[keep], fn[keep], zeta[keep]
-        part = _participation(f, Hn, p) if p.size else np.zeros((0, Hn.shape[1]), complex)
+        part = _participation(f, Hn, p, lsfd) if p.size else np.zeros((0, Hn.shape[1]), complex)
         sf = np.zeros(p.size, bool)
         sz = np.zeros(p.size, bool)
         sv = np.zeros(p.size, bool)
-        if prev is not None and prev[0].size:
+        if prev is not None and prev[0].size and p.size:
             pf, pz, pv = prev
-            for i in range(p.size):
-                j = int(np.argmin(np.abs(np.log(pf / fn[i]))))
-                sf[i] = abs(pf[j] / fn[i] - 1) < STABLE_FREQUENCY
-                sz[i] = sf[i] and abs(pz[j] / zeta[i] - 1) < STABLE_DAMPING
-                sv[i] = sf[i] and _mac(part[i], pv[j]) >= STABLE_MAC
+            j = np.argmin(np.abs(np.log(pf[None, :] / fn[:, None])), axis=1)  # nearest pole of the previous order
+            sf = np.abs(pf[j] / fn - 1) < STABLE_FREQUENCY
+            sz = sf & (np.abs(pz[j] / zeta - 1) < STABLE_DAMPING)
+            for i in np.flatnonzero(sf):
+                sv[i] = _mac(part[i], pv[j[i]]) >= STABLE_MAC
         prev = (fn, zeta, part)
         rows.append((np.full(p.size, n * m), fn, zeta, part, sf, sz, sv))
     cat = [np.concatenate([r[k] for r in rows]) for k in range(7)]
@@ -294,11 +335,67 @@ def _clusters(d: Stabilisation, idx: np.ndarray) -> list[np.ndarray]:
         return []
     if idx.size == 1:
         return [idx]
-    from scipy.cluster.hierarchy import fcluster, linkage
-
     x = np.stack([np.log(d.frequency_hz[idx]) / CLUSTER_LN_F, np.log(d.damping_ratio[idx]) / CLUSTER_LN_ZETA], 1)
-    labels = fcluster(linkage(x, method="average"), t=1.0, criterion="distance")
+    labels = average_linkage_labels(x, 1.0)
     return [idx[labels == k] for k in np.unique(labels)]
+
+
+def average_linkage_labels(x: np.ndarray, t: float) -> np.ndarray:
+    """Flat clusters of the points ``x`` (N, D): average-linkage (UPGMA) merges up to distance ``t``.
+
+    The partition of ``scipy.cluster.hierarchy.fcluster(linkage(x, "average"), t,
+    criterion="distance")`` (Euclidean distances; the Lance-Williams update
+    ``(n_a d_ak + n_b d_bk) / (n_a + n_b)``), written with numpy because
+    importing scipy.cluster costs about 20 ms, more than the clustering of a
+    diagram. Points whose first coordinates are more than ``t`` apart are
+    never joined (every distance across such a gap exceeds ``t``, and so does
+    any average of them), so the points are split at those gaps first and
+    each part is clustered on its own. Labels are 0, 1, ... in order of each
+    cluster's lowest first coordinate.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> average_linkage_labels(np.array([[0.0, 0.0], [0.5, 0.0], [5.0, 0.0], [0.2, 0.3]]), 1.0).tolist()
+    [0, 0, 1, 0]
+    """
+    x = np.asarray(x, dtype=float)
+    labels = np.empty(x.shape[0], dtype=int)
+    order = np.argsort(x[:, 0], kind="stable")
+    n_labels = 0
+    for part in np.split(order, np.flatnonzero(np.diff(x[order, 0]) > t) + 1):
+        for members in _agglomerate(x[part], t):
+            labels[part[members]] = n_labels
+            n_labels += 1
+    return labels
+
+
+def _agglomerate(x: np.ndarray, t: float) -> list[np.ndarray]:
+    """Average-linkage clusters of a few points (index arrays into ``x``): merge the closest pair while
+    its distance is at most ``t`` (average linkage is monotone, so this is the dendrogram cut at t)."""
+    n = x.shape[0]
+    if n == 1:
+        return [np.zeros(1, dtype=int)]
+    diff = x[:, None, :] - x[None, :, :]
+    dist = np.sqrt(np.sum(diff * diff, axis=2))  # as scipy's pdist: sum of squared differences, then sqrt
+    np.fill_diagonal(dist, np.inf)
+    size = np.ones(n)
+    members = [[i] for i in range(n)]
+    while True:
+        k = int(np.argmin(dist))
+        a, b = divmod(k, n)
+        if not dist[a, b] <= t:
+            break
+        merged = (size[a] * dist[a] + size[b] * dist[b]) / (size[a] + size[b])
+        dist[a, :] = merged
+        dist[:, a] = merged
+        dist[a, a] = np.inf
+        dist[b, :] = np.inf
+        dist[:, b] = np.inf
+        size[a] += size[b]
+        members[a] += members[b]
+        members[b] = []
+    return [np.array(sorted(m)) for m in sorted((m for m in members if m), key=lambda m: x[m, 0].min())]
 
 
 def select_poles(d: Stabilisation, min_order_share: float = MIN_ORDER_SHARE,
@@ -406,172 +503,11 @@ def _grid_key(frf) -> tuple:
     return (f.size, round(float(f[0]), 6), round(float(f[1] - f[0]), 9) if f.size > 1 else 0.0)
 
 
-def _in_band(frf, lo: float, hi: float):
-    """The FrfSet restricted to [lo, hi] (group sums included) for cheap jackknife replicates."""
-    from dataclasses import replace
-
-    sel = (frf.frequency_hz >= lo) & (frf.frequency_hz <= hi)
-    sums = {k: (v if k == "n_hits" else np.asarray(v)[:, sel]) for k, v in (frf.group_sums or {}).items()}
-    return replace(frf, frequency_hz=frf.frequency_hz[sel], H=frf.H[sel], coherence=frf.coherence[sel],
-                   group_sums=sums)
-
-
-class _Shared:
-    """Variable-projection problem of one band: FRF columns in groups (runs), each group's basis evaluated
-    at ``s + 1/tau`` of its exponential window (the windowed FRF is ``H(s + 1/tau)``), residues and residual
-    terms per column (internal)."""
-
-    def __init__(self, f, H, groups, shifts, terms=None, scale=None):
-        from guidefit import modes as modes_mod
-
-        self.m = modes_mod
-        self.f = np.asarray(f, float)
-        self.s = 2j * np.pi * self.f
-        self.terms = tuple(terms or modes_mod._DEFAULT_RESIDUALS)
-        if scale is None:
-            rms = np.sqrt(np.mean(np.abs(H) ** 2, axis=0))
-            scale = 1.0 / np.where(rms > 0, rms, 1.0)
-        self.scale = np.asarray(scale, float)
-        self.Y = modes_mod._stack(H * self.scale)
-        self.groups = list(groups)  # slices of columns
-        self.shifts = [float(x) for x in shifts]  # sigma_w (1/s) per group
-
-    def _design(self, p, shift):
-        # exponential window e^{-t/tau} on force and response: H_w(s) = H(s + 1/tau) exactly (Laplace shift), so the
-        # whole basis (the s^2 of the accelerance and the residual terms too) is evaluated at s + 1/tau with the true
-        # poles; only moving the poles (s^2 / (s - p + 1/tau)) biased a 2 kHz mode by -0.0024 % at tau = 0.05 s
-        Phi = self.m._stack(self.m._basis(self.s + shift, p, self.terms))
-        norm = np.sqrt(np.sum(Phi**2, axis=0))
-        norm[norm == 0] = 1.0
-        return Phi / norm, norm
-
-    def residual(self, wn, z) -> np.ndarray:
-        p = self.m._poles(wn, z)
-        E = np.empty_like(self.Y)
-        for g, sh in zip(self.groups, self.shifts):
-            Phi, _ = self._design(p, sh)
-            E[:, g] = self.m._ls_residual(Phi, self.Y[:, g])
-        return E.ravel()
-
-    def jacobian(self, wn, z) -> np.ndarray:
-        """Exact projected Jacobian d residual / d (ln w_n, ln zeta) (Golub-Pereyra, as in guidefit.modes)."""
-        n = wn.size
-        p = self.m._poles(wn, z)
-        dp = np.concatenate([p, z * wn * (-1.0 - 1j * z / np.sqrt(1.0 - z**2))])
-        k = np.concatenate([np.arange(n), np.arange(n)])
-        pairs = np.stack([2 * k, 2 * k + 1], axis=1)
-        J = np.empty(self.Y.shape + (2 * n,))
-        for g, sh in zip(self.groups, self.shifts):
-            Phi, norm = self._design(p, sh)
-            pg = np.concatenate([p, p]) - sh
-            s2 = ((self.s + sh) ** 2)[None, :]
-            da = s2 / (self.s[None, :] - pg[:, None]) ** 2 * dp[:, None]
-            db = s2 / (self.s[None, :] - np.conj(pg)[:, None]) ** 2 * np.conj(dp)[:, None]
-            d = np.stack([da + db, 1j * (da - db)], axis=2)
-            dPhi = np.concatenate([d.real, d.imag], axis=1) / norm[pairs][:, None, :]
-            E, B, solve = self.m._ls_fit(Phi, self.Y[:, g])
-            if solve is None:
-                raise np.linalg.LinAlgError("rank-deficient design")
-            J[:, g, :] = self.m._projected_jacobian(Phi, dPhi, pairs, E, B, solve)
-        return J.reshape(-1, 2 * n)
-
-    def coefficients(self, wn, z) -> np.ndarray:
-        """(L, O) coefficients in the columns' own units."""
-        p = self.m._poles(wn, z)
-        B = np.empty((2 * wn.size + len(self.terms), self.Y.shape[1]))
-        for g, sh in zip(self.groups, self.shifts):
-            Phi, norm = self._design(p, sh)
-            B[:, g] = np.linalg.lstsq(Phi, self.Y[:, g], rcond=None)[0] / norm[:, None]
-        return B / self.scale[None, :]
-
-
-@dataclass(frozen=True)
-class _Fit:
-    modes: list
-    residuals: dict
-    nrmse: float
-
-
-def _solve_shared(prob: _Shared, init, band, *, uncertainty=True, max_nfev=200, tol=1e-10) -> _Fit:
-    import scipy.optimize
-
-    from guidefit import modes as modes_mod
-
-    wn0 = 2 * np.pi * np.array([a for a, _ in init])
-    z0 = np.array([b for _, b in init])
-    n = wn0.size
-    bw = (2 * np.pi * 0.5 * band[0], 2 * np.pi * 2.0 * band[1])
-    lo = np.concatenate([np.full(n, math.log(bw[0])), np.full(n, math.log(1e-5))])
-    hi = np.concatenate([np.full(n, math.log(bw[1])), np.full(n, math.log(0.7))])
-    x0 = np.clip(np.concatenate([np.log(wn0), np.log(np.clip(z0, 1e-5, 0.7))]), lo + 1e-12, hi - 1e-12)
-
-    def split(x):
-        return np.exp(x[:n]), np.exp(x[n:])
-
-    res = scipy.optimize.least_squares(lambda x: prob.residual(*split(x)), x0, jac=lambda x: prob.jacobian(*split(x)),
-                                       bounds=(lo, hi), method="trf", max_nfev=max_nfev,
-                                       xtol=tol, ftol=tol, gtol=tol)
-    wn, z = split(res.x)
-    order = np.argsort(wn)
-    wn, z = wn[order], z[order]
-    B = prob.coefficients(wn, z)
-    cost = float(np.sum(res.fun**2))
-    std_wn = std_z = np.full(n, np.nan)
-    if uncertainty:
-        J = prob.jacobian(wn, z)
-        dof = J.shape[0] - 2 * n - B.size
-        if dof > 0:
-            cov = np.linalg.pinv(J.T @ J) * cost / dof  # d ln wn, d ln zeta
-            sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
-            std_wn, std_z = sd[:n] * wn, sd[n:] * z
-    modes = [modes_mod.Mode(float(wn[k] / (2 * np.pi)), float(z[k]), B[2 * k] + 1j * B[2 * k + 1], "global_fit",
-                            float(std_wn[k] / (2 * np.pi)), float(std_z[k])) for k in range(n)]
-    resid = {t: B[2 * n + j].copy() for j, t in enumerate(prob.terms)}
-    return _Fit(modes, resid, math.sqrt(cost / float(np.sum(prob.Y**2))))
-
-
-def _gauss_newton(prob: _Shared, band, init, iterations: int = 4):
-    """A few Gauss-Newton steps (step halved while the cost rises) of the shared-pole problem from
-    ``init``; for refits that start next to the answer (per-run estimates, selection alternatives).
-    Returns a :class:`_Fit` with the fit's standard errors, or None when a pole leaves the band."""
-    from guidefit import modes as modes_mod
-
-    x = np.concatenate([np.log(2 * np.pi * np.array([a for a, _ in init])), np.log([b for _, b in init])])
-    n = len(init)
-
-    def split(v):
-        return np.exp(v[:n]), np.clip(np.exp(v[n:]), 1e-6, 0.69)
-
-    r = prob.residual(*split(x))
-    cost = float(r @ r)
-    for _ in range(iterations):
-        J = prob.jacobian(*split(x))
-        dx = -np.linalg.lstsq(J, r, rcond=None)[0]
-        step = 1.0
-        while step > 1e-3:
-            trial = x + step * dx
-            rt = prob.residual(*split(trial))
-            if float(rt @ rt) <= cost:
-                break
-            step /= 2
-        else:
-            break
-        done = np.max(np.abs(step * dx)) < 1e-10
-        x, r, cost = trial, rt, float(rt @ rt)
-        if done:
-            break
-    wn, z = split(x)
-    B = prob.coefficients(wn, z)
-    J = prob.jacobian(wn, z)
-    dof = J.shape[0] - 2 * n - B.size
-    sd = np.sqrt(np.maximum(np.diag(np.linalg.pinv(J.T @ J)) * cost / max(dof, 1), 0.0))
-    modes = [modes_mod.Mode(float(wn[k] / (2 * np.pi)), float(z[k]), B[2 * k] + 1j * B[2 * k + 1], "global_fit",
-                            float(sd[k] * wn[k] / (2 * np.pi)), float(sd[n + k] * z[k])) for k in range(n)]
-    if any(modes_mod._suspicious(m, *band) for m in modes):
-        return None
-    order = np.argsort([m.frequency_hz for m in modes])
-    return _Fit([modes[k] for k in order], {t: B[2 * n + j].copy() for j, t in enumerate(prob.terms)},
-                math.sqrt(cost / float(np.sum(prob.Y**2))))
+# the variable-projection problem and its solvers (guidefit.globalvp)
+_Shared = SharedProblem
+_Fit = Fit
+_solve_shared = solve
+_gauss_newton = gauss_newton
 
 
 def _refine(prob: _Shared, band, init, *, uncertainty=True, max_nfev=200, tol=1e-10):
@@ -626,7 +562,7 @@ def _match(modes, reference) -> list:
     return out
 
 
-def _jackknife(frfs: list, band, modes, prob: _Shared) -> list:
+def _jackknife(frfs: list, band, modes, prob: _Shared, poles=None) -> list:
     """Delete-a-group jackknife std (f, zeta) of every mode over the hits of all runs together.
 
     Replicate g leaves group g out of every run (runs with fewer groups keep
@@ -636,39 +572,49 @@ def _jackknife(frfs: list, band, modes, prob: _Shared) -> list:
     Jacobian of the full data, r the projected residuals): removing one group
     of hits moves the optimum little, and the linearised step reproduced the
     full refits of the replicates to about 1 % of their scatter on the
-    simulated test matrix, at 1/8 of their cost.
+    simulated test matrix, at 1/8 of their cost. The residual change is
+    linear in the data, ``r_g - r_0 = (I - P)(Y_g - Y_0)``, so every
+    replicate's step comes from one product with the projected derivatives
+    (:meth:`guidefit.globalvp.SharedProblem.gradient_of`).
     """
     n_groups = max((getattr(x, "n_groups", 0) for x in frfs), default=0)
     if n_groups < 3 or not modes:
         return [(None, None)] * len(modes)
-    banded = [_in_band(x, *band) for x in frfs]
-    subs = [list(x.leave_one_group_out()) if x.n_groups >= 2 else [] for x in banded]
-    wn = 2 * np.pi * np.array([m.frequency_hz for m in modes])
-    z = np.array([m.damping_ratio for m in modes])
+    wn, z = poles if poles is not None else _mode_poles(modes)
     try:
-        pinv = np.linalg.pinv(prob.jacobian(wn, z))
+        JtJ = prob.normal(wn, z)[0]
+        pinv = np.linalg.pinv(JtJ)
     except np.linalg.LinAlgError:
         return [(None, None)] * len(modes)
-    r0 = prob.residual(wn, z)
+    # replicate FRFs of every run, (G, F_band, R): runs with fewer groups keep all hits beyond their count
+    reps = np.concatenate([_replicates(x, band, n_groups) for x in frfs], axis=2)
+    dY = np.concatenate([reps.real, reps.imag], axis=1) * prob.scale - prob.Y[None]  # (G, 2F, O)
+    dY = dY.transpose(1, 2, 0)  # (2F, O, G)
+    dx = -pinv @ prob.gradient_of(wn, z, [dY[:, g] for g in prob.groups])  # (2n, G)
     n = len(modes)
-    fk = [[] for _ in modes]
-    zk = [[] for _ in modes]
-    for g in range(n_groups):
-        H = np.hstack([(s[g] if g < len(s) else x).H for s, x in zip(subs, banded)])
-        rg = _Shared(banded[0].frequency_hz, H, prob.groups, prob.shifts, prob.terms, prob.scale).residual(wn, z)
-        dx = -pinv @ (rg - r0)
-        for k in range(n):
-            fk[k].append(modes[k].frequency_hz * math.exp(dx[k]))
-            zk[k].append(modes[k].damping_ratio * math.exp(dx[n + k]))
     out = []
-    for a, b in zip(fk, zk):
-        n = len(a)
-        if n < 3:
-            out.append((None, None))
-            continue
-        a, b = np.array(a), np.array(b)
-        out.append((math.sqrt((n - 1) / n * np.sum((a - a.mean()) ** 2)),
-                    math.sqrt((n - 1) / n * np.sum((b - b.mean()) ** 2))))
+    for k in range(n):
+        a = modes[k].frequency_hz * np.exp(dx[k])
+        b = modes[k].damping_ratio * np.exp(dx[n + k])
+        out.append((math.sqrt((n_groups - 1) / n_groups * np.sum((a - a.mean()) ** 2)),
+                    math.sqrt((n_groups - 1) / n_groups * np.sum((b - b.mean()) ** 2))))
+    return out
+
+
+def _replicates(frf, band, n_groups: int) -> np.ndarray:
+    """(n_groups, F_band, R) FRFs of ``frf`` in the band without each hit group in turn (the FrfSet's
+    ``leave_one_group_out`` on the band's bins, all groups at once); the FRF of all hits for the
+    replicates beyond the run's own groups (or all of them when it has fewer than 2)."""
+    from guidefit.frf import estimate_frf
+
+    sel = (frf.frequency_hz >= band[0]) & (frf.frequency_hz <= band[1])
+    H = np.asarray(frf.H)[sel]
+    G = getattr(frf, "n_groups", 0) or 0
+    out = np.broadcast_to(H, (n_groups,) + H.shape).copy()
+    if G >= 2:
+        gs = {k: np.asarray(frf.group_sums[k])[:, sel] for k in ("Sff", "Sxx", "Sfx")}
+        sub = {k: np.sum(v, axis=0)[None] - v for k, v in gs.items()}
+        out[:G] = estimate_frf(sub["Sff"], sub["Sxx"], sub["Sfx"], frf.estimator)
     return out
 
 
@@ -707,22 +653,29 @@ def _rss(*values) -> float | None:
     return math.sqrt(sum(v * v for v in vals)) if vals else None
 
 
-def _conservative_std(prob: _Shared, modes: list) -> list:
-    """``modes`` with each f and zeta std the larger of its own and that of ``prob`` at the same poles."""
+def _mode_poles(modes: list, fit=None) -> tuple[np.ndarray, np.ndarray]:
+    """(w_n rad/s, zeta) of ``modes``: the fit's own arrays when it has them for these modes (its problem
+    keeps its design and products there), else from the modes' frequencies and damping ratios."""
+    if fit is not None and getattr(fit, "wn", None) is not None and len(fit.modes) == len(modes):
+        return fit.wn, fit.zeta
+    return 2 * np.pi * np.array([m.frequency_hz for m in modes]), np.array([m.damping_ratio for m in modes])
+
+
+def _conservative_std(prob: _Shared, modes: list, poles=None) -> list:
+    """``modes`` with each f and zeta std the larger of its own and that of ``prob`` at the same poles
+    (``poles``: their (w_n, zeta) arrays, default from the modes)."""
     from dataclasses import replace
 
-    wn = 2 * np.pi * np.array([m.frequency_hz for m in modes])
-    z = np.array([m.damping_ratio for m in modes])
+    wn, z = poles if poles is not None else _mode_poles(modes)
     try:
-        J = prob.jacobian(wn, z)
+        JtJ, _, cost = prob.normal(wn, z)
     except np.linalg.LinAlgError:
         return modes
-    r = prob.residual(wn, z)
     n = len(modes)
-    dof = J.shape[0] - 2 * n - (2 * n + len(prob.terms)) * prob.Y.shape[1]
+    dof = prob.Y.size - 2 * n - (2 * n + len(prob.terms)) * prob.Y.shape[1]
     if dof <= 0:
         return modes
-    sd = np.sqrt(np.maximum(np.diag(np.linalg.pinv(J.T @ J)) * float(r @ r) / dof, 0.0))
+    sd = np.sqrt(np.maximum(np.diag(np.linalg.pinv(JtJ)) * cost / dof, 0.0))
     out = []
     for k, m in enumerate(modes):
         sf, sz = sd[k] * m.frequency_hz, sd[n + k] * m.damping_ratio
@@ -855,12 +808,15 @@ def _global_fit(frf_by_run, band_hz, orders, jackknife, selection_spread, weight
     if len(keep) < len(fit.modes) and keep:
         fit = _refine(prob, band, [(fit.modes[k].frequency_hz, fit.modes[k].damping_ratio) for k in keep]) or fit
     modes = list(fit.modes)
+    poles = _mode_poles(modes, fit)  # where prob keeps its design and products
     if prob.scale is not None and weighting == "noise":
         # the noise-weighted fit is the efficient estimate; its std assumes the model exact and the noise
         # known. The same poles' std in the equally weighted problem also carries the misfit of the weak
         # channels: the larger of the two is reported
-        modes = _conservative_std(_Shared(f, H, groups, shifts), modes)
-    jk = _jackknife(frfs, band, modes, prob) if jackknife else [(None, None)] * len(modes)
+        plain = _Shared(f, H, groups, shifts)
+        plain.share = prob  # the same design at the same poles
+        modes = _conservative_std(plain, modes, poles)
+    jk = _jackknife(frfs, band, modes, prob, poles) if jackknife else [(None, None)] * len(modes)
     thin = _Shared(f[::step], H[::step], groups, shifts) if step > 1 else prob  # a spread, not an estimate
     sp = _selection_spread(thin, band, modes, selection, diagram) if selection_spread else [(None, None)] * len(modes)
     from dataclasses import replace

@@ -76,6 +76,7 @@ from typing import NamedTuple
 import numpy as np
 
 from guidefit.errors import IdentificationError
+from guidefit.prominence import prominent_peaks
 
 __all__ = [
     "BandFit",
@@ -331,51 +332,6 @@ def _parabolic_vertex(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
     if not min(d0, d2) <= t <= max(d0, d2):
         return float(x1), float(y1)
     return float(x1 + t), float(y1 + b * t + a * t * t)
-
-
-def prominent_peaks(y, min_prominence: float) -> tuple[np.ndarray, np.ndarray]:
-    """Local maxima of ``y`` with their topographic prominence, those >= ``min_prominence``.
-
-    The same peaks and prominences as ``scipy.signal.find_peaks(y,
-    prominence=min_prominence)`` (flat tops: the middle sample), written with
-    numpy because importing :mod:`scipy.signal` costs 0.4-0.7 s of start-up,
-    more than the whole identification of a small recording; a test compares
-    the two on random data.
-
-    >>> idx, prom = prominent_peaks(np.array([0, 3, 1, 2, 1, 5, 0.0]), 0.5)
-    >>> idx.tolist(), prom.tolist()
-    ([1, 3, 5], [2.0, 1.0, 5.0])
-    """
-    y = np.asarray(y, dtype=float)
-    n = y.size
-    if n < 3:
-        return np.zeros(0, dtype=int), np.zeros(0)
-    y_arr, y = y, y.tolist()  # python floats for the walks below (one sample at a time)
-    # candidate maxima, plateaus reduced to their middle sample (as scipy's _local_maxima_1d)
-    peaks = []
-    i = 1
-    while i < n - 1:
-        if y[i - 1] < y[i]:
-            ahead = i + 1
-            while ahead < n - 1 and y[ahead] == y[i]:
-                ahead += 1
-            if y[ahead] < y[i]:
-                peaks.append((i + ahead - 1) // 2)
-                i = ahead
-        i += 1
-    idx = np.array(peaks, dtype=int)
-    prom = np.empty(idx.size)
-    for k, p in enumerate(peaks):
-        # walk out to the nearest strictly higher sample (or the edge); the base is the minimum on the way
-        left = p
-        while left > 0 and y[left - 1] <= y[p]:
-            left -= 1
-        right = p
-        while right < n - 1 and y[right + 1] <= y[p]:
-            right += 1
-        prom[k] = y[p] - max(y_arr[left:p + 1].min(), y_arr[p:right + 1].min())
-    keep = prom >= min_prominence
-    return idx[keep], prom[keep]
 
 
 def find_peaks(
@@ -841,16 +797,16 @@ def _poles(wn: np.ndarray, zeta: np.ndarray) -> np.ndarray:
 
 def _basis(s: np.ndarray, poles: np.ndarray, terms: tuple) -> np.ndarray:
     """(F, 2n + len(terms)) complex columns; real coefficients (Re A, Im A, ..., terms)."""
-    s2 = s * s
-    cols = []
-    for p in poles:
-        a = s2 / (s - p)
-        b = s2 / (s - np.conj(p))
-        cols.append(a + b)
-        cols.append(1j * (a - b))
-    for t in terms:
-        cols.append(_RESIDUAL_TERMS[t](s))
-    return np.stack(cols, axis=1)
+    s2 = (s * s)[:, None]
+    poles = np.asarray(poles)
+    a = s2 / (s[:, None] - poles[None, :])
+    b = s2 / (s[:, None] - np.conj(poles)[None, :])
+    out = np.empty((s.size, 2 * poles.size + len(terms)), dtype=complex)
+    out[:, 0:2 * poles.size:2] = a + b  # the same element-wise operations as one column at a time
+    out[:, 1:2 * poles.size:2] = 1j * (a - b)
+    for j, t in enumerate(terms):
+        out[:, 2 * poles.size + j] = _RESIDUAL_TERMS[t](s)
+    return out
 
 
 def _stack(z: np.ndarray) -> np.ndarray:
@@ -861,22 +817,47 @@ def _ls_solver(A: np.ndarray):
     """``V -> (A^T A)^-1 V`` by a Cholesky factor of the normal matrix, or ``None``.
 
     ``None`` when ``A^T A`` is not numerically positive definite (rank-deficient
-    ``A``); callers then fall back to an SVD solve.
+    ``A``); callers then fall back to an SVD solve. LAPACK's ``potrf`` and
+    ``potrs`` are called directly: they are what ``scipy.linalg.cho_factor``
+    and ``cho_solve`` run (same arguments, same numbers), without their
+    argument checks, which cost as much as the factorisation of these small
+    matrices (the global fit factorises a few hundred of them).
     """
-    import scipy.linalg
-
-    try:
-        factor = scipy.linalg.cho_factor(A.T @ A, check_finite=False)
-    except np.linalg.LinAlgError:
+    potrf, potrs = _cholesky_lapack()
+    factor, info = potrf(A.T @ A, lower=False, overwrite_a=False, clean=False)
+    if info > 0:
         return None
-    return lambda V: scipy.linalg.cho_solve(factor, V, check_finite=False)
+    if info < 0:  # pragma: no cover - a malformed argument
+        raise ValueError(f"illegal value in argument {-info} of LAPACK potrf")
+
+    def solve(V):
+        x, info = potrs(factor, V, lower=False, overwrite_b=False)
+        if info != 0:  # pragma: no cover - a malformed argument
+            raise ValueError(f"illegal value in argument {-info} of LAPACK potrs")
+        return x
+
+    return solve
 
 
-def _ls_fit(A: np.ndarray, Y: np.ndarray):
+_LAPACK: list = []
+
+
+def _cholesky_lapack():
+    """LAPACK ``dpotrf`` and ``dpotrs`` (scipy.linalg.lapack), looked up once."""
+    if not _LAPACK:
+        from scipy.linalg import lapack
+
+        _LAPACK.extend([lapack.dpotrf, lapack.dpotrs])
+    return _LAPACK[0], _LAPACK[1]
+
+
+def _ls_fit(A: np.ndarray, Y: np.ndarray, solver=None):
     """Least-squares fit of Y by the columns of A (unit-norm columns).
 
     Normal equations with one step of iterative refinement: much cheaper
     than a QR for tall, narrow A, and as accurate while cond(A)^2 eps << 1.
+    ``solver``: the :func:`_ls_solver` of ``A`` when the caller has it (the
+    same design fitted to other data).
 
     Returns
     -------
@@ -885,7 +866,7 @@ def _ls_fit(A: np.ndarray, Y: np.ndarray):
         :func:`_ls_solver`; ``solve`` is ``None`` when A is rank deficient and the
         fit fell back to an SVD solve.
     """
-    solve = _ls_solver(A)
+    solve = solver or _ls_solver(A)
     if solve is not None:
         B = solve(A.T @ Y)
         B += solve(A.T @ (Y - A @ B))
