@@ -23,14 +23,15 @@ these are small products (:meth:`SharedProblem.normal`):
 
 ``dA^T (I - P) dA`` and ``dA^T E`` come from one product of the ``4n``
 derivative columns with ``[A, dA, E]`` (:meth:`SharedProblem._project`), so
-no ``(2 F O, 2n)`` Jacobian is formed, and ``scipy.optimize.least_squares``
-no longer takes the SVD of one at every iteration (26 304 x 8 on the 100-hit
-benchmark recording: 3288 bins, 4 columns, 4 modes). The trust-region
-iterations themselves are scipy's ("trf", bounds), given the equivalent
-small problem of :func:`compressed`: a residual of ``2n + 1`` entries with
-the same norm, gradient and normal matrix, so they are the same iterations
-(rounding aside). :meth:`SharedProblem.jacobian` still forms the full
-Jacobian (for tests and diagnostics).
+no ``(2 F O, 2n)`` Jacobian is formed, and no SVD of one is taken at every
+iteration (26 304 x 8 on the 100-hit benchmark recording: 3288 bins, 4
+columns, 4 modes), as ``scipy.optimize.least_squares`` did. :func:`solve`
+iterates with :func:`guidefit.lsq.minimize` (bounded Levenberg-Marquardt) on
+these normal equations, to a tighter tolerance than scipy's ``trf`` was run
+with; :func:`gauss_newton` steps on the equivalent small problem of
+:func:`compressed` (a residual of ``2n + 1`` entries with the same norm,
+gradient and normal matrix). :meth:`SharedProblem.jacobian` still forms the
+full Jacobian (for tests and diagnostics).
 
 Examples
 --------
@@ -338,8 +339,14 @@ def _mode_list(wn, z, B, std_wn, std_z) -> list:
 
 def solve(prob: SharedProblem, init, band, *, uncertainty=True, max_nfev=200, tol=1e-10) -> Fit:
     """Variable-projection least squares of the shared poles from ``init`` [(f, zeta)], bounded to half the
-    band's bottom .. twice its top and zeta in [1e-5, 0.7] (scipy's "trf" on :func:`compressed`)."""
-    import scipy.optimize
+    band's bottom .. twice its top and zeta in [1e-5, 0.7].
+
+    The iterations are :func:`guidefit.lsq.minimize`'s (Levenberg-Marquardt on the normal equations
+    of :meth:`SharedProblem.normal`, run to ``tol**1.3``, tighter than scipy's ``trf`` with ``tol``
+    was: they end where it ended, to 1e-11 in frequency on the check set of
+    ``benchmarks/check_modal_same.py``), so that identify does not import :mod:`scipy.optimize`.
+    """
+    from guidefit import lsq
 
     wn0 = 2 * np.pi * np.array([a for a, _ in init])
     z0 = np.array([b for _, b in init])
@@ -352,21 +359,13 @@ def solve(prob: SharedProblem, init, band, *, uncertainty=True, max_nfev=200, to
     def split(x):
         return np.exp(x[:n]), np.exp(x[n:])
 
-    def fun(x):  # the compressed residual: only its norm is known before the Jacobian
-        r = np.zeros(2 * n + 1)
-        r[-1] = math.sqrt(prob.cost(*split(x)))
-        return r
-
-    def jac(x):
-        return compressed(*prob.normal(*split(x)))[1]
-
-    res = scipy.optimize.least_squares(fun, x0, jac=jac, bounds=(lo, hi), method="trf", max_nfev=max_nfev,
-                                       xtol=tol, ftol=tol, gtol=tol)
+    res = lsq.minimize(lambda x: prob.normal(*split(x)), lambda x: prob.cost(*split(x)), x0, lo, hi,
+                       tol=tol**1.3, max_iter=max_nfev)
     wn, z = split(res.x)
     order = np.argsort(wn)
     wn, z = wn[order], z[order]
     B = prob.coefficients(wn, z)
-    cost = float(np.sum(res.fun**2))
+    cost = float(prob.cost(wn, z))
     std_wn = std_z = np.full(n, np.nan)
     if uncertainty:
         JtJ = prob.normal(wn, z)[0]

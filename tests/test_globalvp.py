@@ -89,8 +89,8 @@ def test_compressed_problem_has_the_full_problems_normal_equations():
 
 
 def test_trust_region_fit_on_the_compressed_problem_ends_where_the_full_one_does():
-    """The fit on the compressed residual against scipy's trf on the full residual and Jacobian (the
-    previous implementation): the same optimum to far below the fit's own std."""
+    """The fit (guidefit.lsq on the normal equations) against scipy's trf on the full residual and
+    Jacobian (the first implementation): the same optimum to far below the fit's own std."""
     import scipy.optimize
 
     prob, _, _ = _problem()
