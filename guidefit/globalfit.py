@@ -489,13 +489,16 @@ class GlobalFit:
 
         return replace(self.modes[k], residues=np.asarray(self.modes[k].residues)[self.runs[run]])
 
-    def synthesize(self, run: str) -> np.ndarray:
-        """The fitted model of one run's FRFs on :attr:`frequency_hz`, ``(F, R_run)``."""
+    def synthesize(self, run: str, window_tau_s: float | None = None) -> np.ndarray:
+        """The fitted model of one run's FRFs on :attr:`frequency_hz`, ``(F, R_run)``; with the run's
+        ``window_tau_s`` as its windowed FRFs were measured (the model at ``s + 1/tau``), else the
+        system's own FRFs."""
         from guidefit import modes as modes_mod
 
         sl = self.runs[run]
         res = {k: np.asarray(v)[sl] for k, v in self.residuals.items()}
-        return modes_mod.synthesize(self.frequency_hz, [self.run_mode(k, run) for k in range(len(self.modes))], res)
+        return modes_mod.synthesize(self.frequency_hz, [self.run_mode(k, run) for k in range(len(self.modes))], res,
+                                    window_tau_s)
 
 
 def _grid_key(frf) -> tuple:

@@ -1631,7 +1631,8 @@ def _grow(f, H, fit: BandFit, territory, fit_kwargs, max_extra=2) -> BandFit:
     return fit
 
 
-def synthesize(frequency_hz, modes: Sequence[Mode], residuals: dict | None = None) -> np.ndarray:
+def synthesize(frequency_hz, modes: Sequence[Mode], residuals: dict | None = None,
+               window_tau_s: float | None = None) -> np.ndarray:
     """Accelerance of modes (and residual terms) on a frequency grid.
 
     Evaluates the model of the module docstring and :func:`fit_modes`; the
@@ -1646,6 +1647,10 @@ def synthesize(frequency_hz, modes: Sequence[Mode], residuals: dict | None = Non
     residuals : dict of str to array_like, optional
         Residual-term coefficients as in :attr:`BandFit.residuals`, ``(R,)``
         real each.
+    window_tau_s : float, optional
+        The FRF as measured through an exponential window ``exp(-t/tau)`` on
+        force and response: the whole model at ``s + 1/tau`` (what the
+        global fit fits, :mod:`guidefit.globalvp`). None: the system's own FRF.
 
     Returns
     -------
@@ -1672,7 +1677,7 @@ def synthesize(frequency_hz, modes: Sequence[Mode], residuals: dict | None = Non
         R = np.asarray(modes[0].residues).size
     else:
         R = np.asarray(next(iter(residuals.values()))).size
-    s = 2j * np.pi * f[:, None]
+    s = 2j * np.pi * f[:, None] + (1.0 / float(window_tau_s) if window_tau_s else 0.0)
     H = np.zeros((f.size, R), dtype=complex)
     for k, m in enumerate(modes):
         A = np.asarray(m.residues, dtype=complex).reshape(-1)

@@ -386,7 +386,7 @@ def _plot_global(result, path: str) -> None:
         frf = run.frf
         f = np.asarray(frf.frequency_hz)
         sel = (f >= 0.8 * lo) & (f <= 1.1 * hi)
-        model = fit.synthesize(run.name)
+        model = fit.synthesize(run.name, frf.exp_window_tau_s)  # as measured: through the run's window
         ax_m, ax_p, ax_c = (fig.add_subplot(grid[i, j]) for i in range(3))
         for k, name in enumerate(frf.channels):
             color = f"C{k % 10}"
@@ -402,7 +402,9 @@ def _plot_global(result, path: str) -> None:
                           va="top", fontsize=7)
         for ax in (ax_m, ax_p, ax_c):
             ax.axvspan(lo, hi, color="C2", alpha=0.04)
-        ax_m.set_title(f"run '{run.name}' ({frf.estimator}, {frf.n_averages} hits): measured, global fit dashed")
+        windowed = " (through the run's window, as measured)" if frf.exp_window_tau_s else ""
+        ax_m.set_title(f"run '{run.name}' ({frf.estimator}, {frf.n_averages} hits): measured, global fit "
+                       f"dashed{windowed}", fontsize=9)
         ax_m.set_ylabel("|H| ((m/s^2)/N)")
         ax_p.set_ylabel("phase (deg)")
         ax_c.set_ylabel("coherence")
