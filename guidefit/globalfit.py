@@ -196,7 +196,7 @@ def _reduced_matrices(f: np.ndarray, H3: np.ndarray, n_max: int, ts: float):
 
 def _lscf_poles(R, S, T, n: int, m: int, ts: float) -> np.ndarray:
     """Poles (rad/s) of the right matrix-fraction denominator of order n (highest coefficient I_m)."""
-    from guidefit.modes import _cholesky_lapack
+    from guidefit.curvefit import _cholesky_lapack
 
     k = n + 1
     c = k * m
@@ -237,17 +237,17 @@ def _participation(f: np.ndarray, H: np.ndarray, poles: np.ndarray, problem: Sha
     shift) when the caller has one: its design (the same numbers as ``modes._basis``, residual-term
     columns made once) and stacked ``H`` serve every order of a diagram.
     """
-    from guidefit import modes as modes_mod
+    from guidefit import curvefit
 
     prob = problem or SharedProblem(f, H, [slice(None)], [0.0], scale=np.ones(np.shape(H)[1]))
     A, norm = prob._design(np.asarray(poles), 0.0)
     Y = prob.Y
-    solve = modes_mod._ls_solver(A)
+    solve = curvefit._ls_solver(A)
     if solve is not None:  # modes._ls_fit's coefficients (its residual is not needed here)
         B = solve(A.T @ Y)
         B += solve(A.T @ (Y - A @ B))
     if solve is None or not np.all(np.isfinite(B)):
-        B = modes_mod._ls_fit(A, Y)[1]
+        B = curvefit._ls_fit(A, Y)[1]
     B = B / norm[:, None]
     res = B[0 : 2 * poles.size : 2] + 1j * B[1 : 2 * poles.size : 2]  # (n, O)
     return 2j * poles.imag[:, None] * res
@@ -516,7 +516,7 @@ _gauss_newton = gauss_newton
 def _refine(prob: _Shared, band, init, *, uncertainty=True, max_nfev=200, tol=1e-10):
     """Variable-projection fit from ``init`` [(f, zeta)]; modes that leave the band or hit a bound are
     dropped and the rest refitted. None when nothing is left."""
-    from guidefit import modes as modes_mod
+    from guidefit import curvefit
 
     init = list(init)
     while init:
@@ -528,7 +528,7 @@ def _refine(prob: _Shared, band, init, *, uncertainty=True, max_nfev=200, tol=1e
         except (ValueError, np.linalg.LinAlgError):
             init = init[:-1]
             continue
-        good = [(m.frequency_hz, m.damping_ratio) for m in fit.modes if not modes_mod._suspicious(m, *band)]
+        good = [(m.frequency_hz, m.damping_ratio) for m in fit.modes if not curvefit._suspicious(m, *band)]
         if len(good) == len(fit.modes):
             return fit
         init = good

@@ -53,6 +53,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from guidefit import curvefit
 from guidefit import modes as modes_mod
 
 #: a derivative column keeping less than this share of its squared norm outside the design's span is
@@ -89,7 +90,7 @@ class SharedProblem:
             rms = np.sqrt(np.mean(np.abs(H) ** 2, axis=0))
             scale = 1.0 / np.where(rms > 0, rms, 1.0)
         self.scale = np.asarray(scale, float)
-        self.Y = modes_mod._stack(H * self.scale)
+        self.Y = curvefit._stack(H * self.scale)
         self.groups = list(groups)  # slices of columns
         self.shifts = [float(x) for x in shifts]  # sigma_w (1/s) per group
         self._key = None
@@ -142,16 +143,16 @@ class SharedProblem:
         key = (np.asarray(wn, float).tobytes(), np.asarray(z, float).tobytes())
         if key != self._key:
             src = self.share if self.share is not None and self.share._key == key else None
-            p = modes_mod._poles(wn, z)
+            p = curvefit._poles(wn, z)
             self._fits = []
             for i, (g, sh) in enumerate(zip(self.groups, self.shifts)):
                 if src is None:
                     Phi, norm = self._design(p, sh)
-                    E, B, solve = modes_mod._ls_fit(Phi, self.Y[:, g])
+                    E, B, solve = curvefit._ls_fit(Phi, self.Y[:, g])
                     fit = {"Phi": Phi, "norm": norm, "E": E, "B": B, "solve": solve}
                 else:
                     fit = {k: v for k, v in src._fits[i].items() if k in _DESIGN_PARTS}
-                    fit["E"], fit["B"], fit["solve"] = modes_mod._ls_fit(fit["Phi"], self.Y[:, g], fit["solve"])
+                    fit["E"], fit["B"], fit["solve"] = curvefit._ls_fit(fit["Phi"], self.Y[:, g], fit["solve"])
                 self._fits.append(fit)
             self._key = key
         return self._fits
@@ -173,7 +174,7 @@ class SharedProblem:
         pairs ``(2n, 2)``."""
         n = wn.size
         F = self.s.size
-        p = modes_mod._poles(wn, z)
+        p = curvefit._poles(wn, z)
         dp = np.concatenate([p, z * wn * (-1.0 - 1j * z / np.sqrt(1.0 - z**2))])
         k = np.concatenate([np.arange(n), np.arange(n)])
         pairs = np.stack([2 * k, 2 * k + 1], axis=1)
@@ -202,7 +203,7 @@ class SharedProblem:
                 raise np.linalg.LinAlgError("rank-deficient design")
             dA, pairs = self._derivatives(wn, z, sh, fit["norm"])
             dPhi = dA.reshape(dA.shape[0], 2 * n, 2).transpose(1, 0, 2)  # (2n, 2F, 2)
-            J[:, g, :] = modes_mod._projected_jacobian(fit["Phi"], dPhi, pairs, fit["E"], fit["B"], fit["solve"])
+            J[:, g, :] = curvefit._projected_jacobian(fit["Phi"], dPhi, pairs, fit["E"], fit["B"], fit["solve"])
         return J.reshape(-1, 2 * n)
 
     def normal(self, wn, z) -> tuple[np.ndarray, np.ndarray, float]:
@@ -412,7 +413,7 @@ def gauss_newton(prob: SharedProblem, band, init, iterations: int = 4) -> Fit | 
     dof = prob.Y.size - 2 * n - B.size
     sd = np.sqrt(np.maximum(np.diag(np.linalg.pinv(JtJ)) * cost / max(dof, 1), 0.0))
     modes = _mode_list(wn, z, B, sd[:n] * wn, sd[n:] * z)
-    if any(modes_mod._suspicious(m, *band) for m in modes):
+    if any(curvefit._suspicious(m, *band) for m in modes):
         return None
     order = np.argsort([m.frequency_hz for m in modes])
     return Fit([modes[k] for k in order], {t: B[2 * n + j].copy() for j, t in enumerate(prob.terms)},

@@ -247,10 +247,10 @@ def _narrow_band(mode) -> tuple[float, float]:
 
 def _refit_one(frf, mode, max_nfev: int = 20, uncertainty: bool = True):
     """Refit one mode in its narrow band, starting from ``mode`` (None when the fit fails)."""
-    from guidefit import modes as modes_mod
+    from guidefit import curvefit
 
     try:
-        return modes_mod.fit_modes(frf.frequency_hz, frf.H, _narrow_band(mode), 1, initial=[mode],
+        return curvefit.fit_modes(frf.frequency_hz, frf.H, _narrow_band(mode), 1, initial=[mode],
                                    max_nfev=max_nfev, uncertainty=uncertainty)[0]
     except (IdentificationError, ValueError, np.linalg.LinAlgError):
         return None
@@ -292,6 +292,7 @@ def _refit_in_band(frf, mode, run_fits, max_nfev: int = 40):
     """
     import warnings as _w
 
+    from guidefit import curvefit
     from guidefit import modes as modes_mod
 
     lo, hi = _narrow_band(mode)
@@ -334,7 +335,7 @@ def _refit_in_band(frf, mode, run_fits, max_nfev: int = 40):
         try:
             with _w.catch_warnings():
                 _w.simplefilter("ignore")
-                fits = modes_mod.fit_modes(f, H, (lo, hi), len(group), initial=group, weights=weights,
+                fits = curvefit.fit_modes(f, H, (lo, hi), len(group), initial=group, weights=weights,
                                            max_nfev=max_nfev if len(group) > 1 else 20)
         except (IdentificationError, ValueError, np.linalg.LinAlgError):
             continue
@@ -415,6 +416,7 @@ MIN_BINS_IN_BAND = 8  # fewer FRF bins than this in the search band: no mode fit
 
 
 def _fit_run(run, frf, guide, model, settings, warnings: list) -> list[IdentifiedMode]:
+    from guidefit import curvefit
     from guidefit import frf as frf_mod
     from guidefit import modes as modes_mod
     from guidefit.model import vibration as vib
@@ -436,7 +438,7 @@ def _fit_run(run, frf, guide, model, settings, warnings: list) -> list[Identifie
 
         with _w.catch_warnings(record=True) as caught:
             _w.simplefilter("always")
-            fitted = modes_mod.auto_fit(frf.frequency_hz, frf.H, band[0], band[1])
+            fitted = curvefit.auto_fit(frf.frequency_hz, frf.H, band[0], band[1])
         for w in caught:
             if issubclass(w.category, modes_mod.ModeFitWarning):
                 warnings.append(f"run '{run.name}': {w.message}")

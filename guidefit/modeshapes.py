@@ -165,18 +165,18 @@ def _half_power_entry(frf, mode, tau_s) -> dict | None:
     import warnings as _w
 
     from guidefit import frf as frf_mod
-    from guidefit import modes as modes_mod
+    from guidefit import halfpower
 
     channel = int(np.argmax(np.abs(mode.residues)))
     peak = int(np.argmin(np.abs(frf.frequency_hz - mode.peak_frequency_hz)))
     try:
         with _w.catch_warnings():
             _w.simplefilter("ignore")
-            hp = modes_mod.half_power(frf.frequency_hz, frf.H[:, channel], peak)
+            hp = halfpower.half_power(frf.frequency_hz, frf.H[:, channel], peak)
     except (IdentificationError, ValueError):
         return None
     # Eq. (26)/(28) as printed divide by the |H| peak; the exact SDOF accelerance relation gives f_n
-    sdof = modes_mod.sdof_from_half_power(hp.f1_hz, hp.f2_hz)
+    sdof = halfpower.sdof_from_half_power(hp.f1_hz, hp.f2_hz)
     f_n, zeta = sdof.f_n_hz, sdof.zeta
     if tau_s:
         f_n, zeta = frf_mod.exponential_window_damping_correction(sdof.zeta, sdof.f_n_hz, tau_s)

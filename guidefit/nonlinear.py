@@ -186,7 +186,7 @@ def apparent_mode(frequency_hz, H, band_hz, exp_tau_s: float | None = None, init
     """
     import warnings
 
-    from guidefit import modes as modes_mod
+    from guidefit import curvefit
 
     f = np.asarray(frequency_hz, float)
     H = np.asarray(H)
@@ -200,7 +200,7 @@ def apparent_mode(frequency_hz, H, band_hz, exp_tau_s: float | None = None, init
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            mode = modes_mod.fit_modes(f, H, (lo, hi), 1, weights=weights,
+            mode = curvefit.fit_modes(f, H, (lo, hi), 1, weights=weights,
                                        initial=None if initial is None else [initial])[0]
     except (ValueError, np.linalg.LinAlgError) as exc:
         raise IdentificationError(f"no mode in {band_hz[0]:.0f}-{band_hz[1]:.0f} Hz ({exc})") from None
