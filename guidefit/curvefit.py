@@ -1,8 +1,8 @@
 """Modal curve fitting of one run's FRFs: variable projection of poles and residues in a band,
 the automatic per-run fit (:func:`auto_fit`), and the linear-algebra pieces the global fit reuses.
 
-Part of :mod:`guidefit.modes` (types, peak picking, :func:`guidefit.modes.synthesize`); every name
-here is importable from there too.
+Built on :mod:`guidefit.modal_base` (types, peak picking, :func:`guidefit.modal_base.synthesize`);
+every public name here is importable from :mod:`guidefit.modes` too.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import numpy as np
 
 from guidefit.errors import IdentificationError
 from guidefit.halfpower import half_power, sdof_from_half_power
-from guidefit.modes import (
+from guidefit.modal_base import (
     _DEFAULT_RESIDUALS,
     _RESIDUAL_TERMS,
     BandFit,

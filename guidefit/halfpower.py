@@ -1,7 +1,8 @@
 """The paper's half-power method: the -3 dB band of a resonance peak and the natural frequency and
 damping it gives, Eq. (26)-(29) as :func:`guidefit.identify` applies them, with the peak corrections.
 
-Part of :mod:`guidefit.modes` (types, peak picking); every name here is importable from there too.
+Part of the modal stage beside :mod:`guidefit.modal_base` (types, peak picking); every name here is
+importable from :mod:`guidefit.modes` too.
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ import warnings
 import numpy as np
 
 from guidefit.errors import IdentificationError
-from guidefit.modes import (
+from guidefit.modal_base import (
     _KINDS,
     _PEAK_INTERPOLATIONS,
     HalfPower,
@@ -23,6 +24,7 @@ from guidefit.modes import (
     _as_frf,
     _parabolic_vertex,
     mode_indicator,
+    natural_from_peak_frequency,
 )
 
 
@@ -257,48 +259,6 @@ def sdof_from_half_power(f1_hz: float, f2_hz: float, kind: str = "accelerance") 
     else:
         fn = math.sqrt((f1 * f1 + f2 * f2) / (2.0 * g))
     return SdofEstimate(fn, zeta, natural_from_peak_frequency(fn, zeta, kind, inverse=True))
-
-
-def natural_from_peak_frequency(
-    f_peak_hz: float, zeta: float, kind: str = "accelerance", *, inverse: bool = False
-) -> float:
-    """Undamped natural frequency from the |H| peak of an SDOF FRF (or back).
-
-    ``f_n = f_peak sqrt(1 - 2 zeta^2)`` for accelerance,
-    ``f_n = f_peak / sqrt(1 - 2 zeta^2)`` for receptance, ``f_n = f_peak`` for
-    mobility. With ``inverse=True`` the first argument is ``f_n`` and the peak
-    frequency is returned.
-
-    Parameters
-    ----------
-    f_peak_hz : float
-        Frequency of the magnitude peak in Hz (``f_n`` if ``inverse``).
-    zeta : float
-        Damping ratio, ``0 <= zeta < 1/sqrt(2)``.
-    kind : {"accelerance", "mobility", "receptance"}
-        The kind of FRF.
-    inverse : bool, default False
-        Convert ``f_n`` to the peak frequency instead.
-
-    Returns
-    -------
-    float
-        Frequency in Hz.
-
-    Examples
-    --------
-    >>> round(natural_from_peak_frequency(1087.05, 0.105), 1)
-    1075.0
-    """
-    if kind not in _KINDS:
-        raise ValueError(f"kind must be one of {_KINDS}, got {kind!r}")
-    if not 0 <= zeta < math.sqrt(0.5):
-        raise ValueError(f"zeta must be in [0, 1/sqrt(2)), got {zeta}")
-    if kind == "mobility":
-        return float(f_peak_hz)
-    g = math.sqrt(1.0 - 2.0 * zeta * zeta)
-    up = (kind == "accelerance") != inverse
-    return float(f_peak_hz) * g if up else float(f_peak_hz) / g
 
 
 def half_power_mode(
