@@ -85,6 +85,26 @@ class FileFormat:
 
 
 _FORMATS: tuple[FileFormat, ...] | None = None
+_MODULE_FORMATS: dict[str, tuple[FileFormat, ...]] = {}
+
+
+def _module_names() -> list[str]:
+    """The format modules of :mod:`guidefit.io`, in name order (nothing imported)."""
+    return [f"{_PACKAGE}.{info.name}" for info in sorted(pkgutil.iter_modules([str(_PACKAGE_DIR)]),
+                                                         key=lambda m: m.name)
+            if not info.name.startswith("_") and info.name not in _NOT_FORMATS]
+
+
+def _formats_of(name: str) -> tuple[FileFormat, ...]:
+    """The formats module ``name`` declares (imported on first use)."""
+    if name not in _MODULE_FORMATS:
+        found = []
+        for fmt in getattr(importlib.import_module(name), "FORMATS", ()):
+            if not isinstance(fmt, FileFormat):
+                raise TypeError(f"{name}.FORMATS holds {type(fmt).__name__}; expected FileFormat")
+            found.append(FileFormat(**{**fmt.__dict__, "module": name}))
+        _MODULE_FORMATS[name] = tuple(found)
+    return _MODULE_FORMATS[name]
 
 
 def formats(kind: str | None = None) -> tuple[FileFormat, ...]:
@@ -97,17 +117,7 @@ def formats(kind: str | None = None) -> tuple[FileFormat, ...]:
     """
     global _FORMATS
     if _FORMATS is None:
-        found = []
-        for info in sorted(pkgutil.iter_modules([str(_PACKAGE_DIR)]), key=lambda m: m.name):
-            if info.name.startswith("_") or info.name in _NOT_FORMATS:
-                continue
-            name = f"{_PACKAGE}.{info.name}"
-            module = importlib.import_module(name)
-            for fmt in getattr(module, "FORMATS", ()):
-                if not isinstance(fmt, FileFormat):
-                    raise TypeError(f"{name}.FORMATS holds {type(fmt).__name__}; expected FileFormat")
-                found.append(FileFormat(**{**fmt.__dict__, "module": name}))
-        _FORMATS = tuple(found)
+        _FORMATS = tuple(fmt for name in _module_names() for fmt in _formats_of(name))
     if kind is None:
         return _FORMATS
     return tuple(f for f in _FORMATS if f.kind == kind)
@@ -130,6 +140,12 @@ def format_for(path, kind: str, action: str) -> FileFormat:
     """
     display = os.fspath(path)
     suffix = Path(display).suffix.lower()
+    # the modules in the order formats() lists them, imported only up to the first that takes the
+    # suffix (an .h5 recording does not import the TDMS, MDF, MAT, WAV, text and UFF readers)
+    for name in _module_names():
+        for fmt in _formats_of(name):
+            if fmt.kind == kind and getattr(fmt, action) is not None and suffix in fmt.suffixes:
+                return fmt
     candidates = [f for f in formats(kind) if getattr(f, action) is not None]
     for fmt in candidates:
         if suffix in fmt.suffixes:
