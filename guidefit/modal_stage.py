@@ -199,6 +199,8 @@ def assemble_motion(constants: dict, sensors: dict, drive: dict | None = None, i
     q, scale = _assemble_in(basis, constants, sensors, drive, runs, iterations)
     top_scale = max(abs(s) for s in scale.values()) or 1.0
     seen = [r for r in runs if abs(scale[r]) > 0.05 * top_scale]
+    if not seen:  # no run's sensors read any of this motion (e.g. every sensor at one point, along one axis)
+        return np.zeros(5), {r: 0.0 for r in constants}, np.zeros(5, bool)
     if mass is not None and len(seen) < len(runs):  # the unseen motion of the runs that excite the mode
         seen_basis = observable_basis(np.vstack([sensors[r] for r in seen]), mass)
         if seen_basis.shape[1] < basis.shape[1]:
