@@ -3,6 +3,15 @@
 import os
 
 import pytest
+from hypothesis import settings
+
+# The property tests draw the same examples on every run by default, so that a red CI means that a
+# change broke something, not that a new random draw found an old defect (one did: every sensor at
+# one point, now a fixed example of test_input_properties). HYPOTHESIS_PROFILE=explore draws new
+# examples each run: the way to hunt for hostile inputs (README, "Tests").
+settings.register_profile("ci", derandomize=True)
+settings.register_profile("explore", derandomize=False)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
 
 @pytest.fixture(autouse=True)
