@@ -75,11 +75,11 @@ print(acc)
 
 
 def process_cmd(name: str, path: Path) -> list[str]:
-    """The whole-process variants: the floor script, or the guidefit command."""
+    """The whole-process variants: the floor script, or ``guidefit identify FILE``."""
     if name == "floor_process":
         return [sys.executable, "-c", FLOOR_PROCESS, str(path)]
     exe = shutil.which("guidefit")
-    return [exe] if exe else [sys.executable, "-m", "guidefit"]
+    return ([exe] if exe else [sys.executable, "-m", "guidefit"]) + ["identify", str(path)]
 
 
 PROCESSES = {"floor_process": "floor as a process: python -c (h5py, scipy.fft; read + one rfft pass)",
@@ -87,8 +87,7 @@ PROCESSES = {"floor_process": "floor as a process: python -c (h5py, scipy.fft; r
 
 
 def run_process(name: str, path: Path) -> dict:
-    cmd = process_cmd(name, path) + ([] if name == "floor_process" else ["identify", str(path)])
-    m = C.measure(cmd)
+    m = C.measure(process_cmd(name, path))
     if m["returncode"] not in (0, 1):  # 1: a gate or check, still a whole run
         raise RuntimeError(f"{name} failed:\n{m['stderr'][-2000:]}")
     return m

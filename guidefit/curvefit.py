@@ -15,6 +15,8 @@ import numpy as np
 
 from guidefit.errors import IdentificationError
 from guidefit.halfpower import half_power, sdof_from_half_power
+
+__all__ = ["auto_fit", "fit_band", "fit_modes"]
 from guidefit.modal_base import (
     _DEFAULT_RESIDUALS,
     _RESIDUAL_TERMS,

@@ -366,7 +366,7 @@ def solve(prob: SharedProblem, init, band, *, uncertainty=True, max_nfev=200, to
     order = np.argsort(wn)
     wn, z = wn[order], z[order]
     B = prob.coefficients(wn, z)
-    cost = float(prob.cost(wn, z))
+    cost = res.cost
     std_wn = std_z = np.full(n, np.nan)
     if uncertainty:
         JtJ = prob.normal(wn, z)[0]

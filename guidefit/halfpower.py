@@ -27,6 +27,8 @@ from guidefit.modal_base import (
     natural_from_peak_frequency,
 )
 
+__all__ = ["half_power", "half_power_mode", "sdof_from_half_power"]
+
 
 def _magnitude(f: np.ndarray, H_channel_or_magnitude) -> np.ndarray:
     h = np.asarray(H_channel_or_magnitude)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import stat
 from pathlib import Path
 
 from guidefit.errors import RecordingError
@@ -34,8 +35,6 @@ def read_json_documents(path) -> list:
         raise RecordingError(f"{p}: no such file") from None
     except OSError as exc:
         raise RecordingError(f"{p}: cannot read ({exc.__class__.__name__})") from None
-    import stat
-
     if stat.S_ISDIR(info.st_mode):
         raise RecordingError(f"{p}: is a directory; expected a JSON result file")
     if not stat.S_ISREG(info.st_mode):

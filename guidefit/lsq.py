@@ -124,7 +124,7 @@ def minimize(normal, cost, x0, lower=None, upper=None, *, tol: float = 1e-12, ma
             A, g, c = normal(x)
             mu *= max(1.0 / 3.0, 1.0 - (2.0 * gain - 1.0) ** 3)
             nu = 2.0
-            if drop <= tol * c and 2.0 * predicted <= tol * max(c, 1e-300) * 10.0:
+            if drop <= tol * c and 2.0 * predicted <= tol * c:  # actual and predicted: as MINPACK's ftol
                 return LsqResult(x, c, it, True)
         else:
             mu, nu = mu * nu, nu * 2.0

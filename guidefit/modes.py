@@ -7,7 +7,12 @@ and in docs/modes.md. This module only gathers the names, so that ``guidefit.mod
 ``from guidefit.modes import half_power`` keep working as they did before the split.
 """
 
-from guidefit.curvefit import (  # noqa: F401  (private names: used by the global fit and the tests)
+from guidefit import curvefit as _curvefit
+from guidefit import halfpower as _halfpower
+from guidefit import modal_base as _modal_base
+
+# the public names (each module's __all__) and the private ones the global fit and the tests use
+from guidefit.curvefit import (  # noqa: F401
     _basis,
     _cholesky_lapack,
     _covariance,
@@ -26,8 +31,8 @@ from guidefit.curvefit import (  # noqa: F401  (private names: used by the globa
     fit_band,
     fit_modes,
 )
-from guidefit.halfpower import half_power, half_power_mode, sdof_from_half_power
-from guidefit.modal_base import (  # noqa: F401  (private names: used by the global fit and the tests)
+from guidefit.halfpower import half_power, half_power_mode, sdof_from_half_power  # noqa: F401
+from guidefit.modal_base import (  # noqa: F401
     _DEFAULT_RESIDUALS,
     _KINDS,
     _PEAK_INTERPOLATIONS,
@@ -50,23 +55,4 @@ from guidefit.modal_base import (  # noqa: F401  (private names: used by the glo
     synthesize,
 )
 
-__all__ = [
-    "BandFit",
-    "HalfPower",
-    "HalfPowerWarning",
-    "Mode",
-    "ModeFitWarning",
-    "Peaks",
-    "SdofEstimate",
-    "auto_fit",
-    "find_peaks",
-    "fit_band",
-    "fit_modes",
-    "half_power",
-    "half_power_mode",
-    "mode_indicator",
-    "modes_to_frame",
-    "natural_from_peak_frequency",
-    "sdof_from_half_power",
-    "synthesize",
-]
+__all__ = [*_modal_base.__all__, *_halfpower.__all__, *_curvefit.__all__]
