@@ -135,7 +135,6 @@ import numpy as np
 
 from guidefit.errors import IdentificationError
 from guidefit.spectra import (  # noqa: F401  (re-exported: the FRF engine's names, importable from here)
-    _CHUNK_BINS,
     DEFAULT_GROUPS,
     PAIR_HITS_PER_GROUP,
     PRECISIONS,
@@ -160,7 +159,6 @@ from guidefit.windows import (  # noqa: F401  (re-exported: the windows, importa
     WindowChoice,
     WindowSettings,
     _choose,
-    _force_offset,
     choose_windows,
     exponential_window,
     exponential_window_damping_correction,
