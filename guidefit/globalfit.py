@@ -741,6 +741,40 @@ def _references(frfs: list, sel: np.ndarray):
     return np.stack(cols, axis=2)
 
 
+def _diagram(f, H, orders, refs, groups: list) -> Stabilisation:
+    """The stabilisation diagram of all runs: poly-reference when the runs share channels and differ in
+    hit (``refs``); else, with several runs, each run's own common-denominator diagram, the poles of all
+    of them in one diagram (each pole's participation on its own run's columns, zero on the others).
+
+    Runs that share no channel (one axis per run: y sensors in the vertical run, x in the lateral) see
+    different modes: in one common-denominator fit of all columns a mode that only the lateral run shows
+    (a damped roll_low beside the vertical run's pitch, a weakly hit yaw) stabilises at few orders or not
+    at all, while each run's own diagram holds it at most orders (validation file v2_side: roll_low at
+    3 of 23 orders together, 16 of 23 alone). :func:`select_poles` then clusters the poles of all runs:
+    a mode that several runs show is one cluster.
+    """
+    if refs is not None or len(groups) < 2:
+        return lscf_stabilisation(f, H, orders, references=refs)
+    parts = []
+    for sl in groups:
+        try:
+            parts.append((sl, lscf_stabilisation(f, H[:, sl], orders)))
+        except IdentificationError:
+            continue
+    if not parts:
+        return lscf_stabilisation(f, H, orders)
+    n_cols = H.shape[1]
+    pad = []
+    for sl, d in parts:
+        full = np.zeros((d.participation.shape[0], n_cols), complex)
+        full[:, sl] = d.participation
+        pad.append(full)
+    cat = [np.concatenate([getattr(d, k) for _, d in parts]) for k in
+           ("orders", "frequency_hz", "damping_ratio")]
+    flags = [np.concatenate([getattr(d, k) for _, d in parts]) for k in ("stable_f", "stable_z", "stable_v")]
+    return Stabilisation(cat[0], cat[1], cat[2], np.concatenate(pad), *flags, parts[0][1].band_hz)
+
+
 def global_fit(frf_by_run: dict, band_hz: tuple, *, orders: Sequence[int] = range(4, 49, 2),
                jackknife: bool = True, selection_spread: bool = True, weighting: str = "noise") -> GlobalFit:
     """Identify the modes of all runs together: LSCF diagram, pole selection, global refinement.
@@ -797,7 +831,7 @@ def _global_fit(frf_by_run, band_hz, orders, jackknife, selection_spread, weight
     # the diagram only seeds the refinement: at most ~MAX_DIAGRAM_BINS bins (long records: every k-th)
     step = max(1, int(math.ceil(f.size / MAX_DIAGRAM_BINS)))
     refs = _references(frfs, sel_bins)
-    diagram = lscf_stabilisation(f[::step], H[::step], orders, references=None if refs is None else refs[::step])
+    diagram = _diagram(f[::step], H[::step], orders, None if refs is None else refs[::step], list(runs.values()))
     selection = select_poles(diagram)
     if not selection.chosen:
         raise IdentificationError(f"global fit: no stable pole between {band[0]:.0f} and {band[1]:.0f} Hz")

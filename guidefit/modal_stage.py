@@ -159,11 +159,42 @@ def _widen_to_peaks(frf_by_run: dict, f_lo: float, f_hi: float, settings) -> tup
         except (ValueError, IdentificationError):
             continue
         for fp in pk.frequency_hz:
+            if not _excited(frf, float(fp), f_lo, f_hi):
+                continue  # a notch of the hammer's force spectrum, not a resonance
             if settings.f_max_hz is None and f_hi < fp <= hi_cap / 1.15:
                 new_hi = max(new_hi, 1.15 * float(fp))
             if settings.f_min_hz is None and lo_cap / 0.75 <= fp < f_lo:
                 new_lo = min(new_lo, 0.75 * float(fp))
     return new_lo, min(new_hi, hi_cap) if new_hi > f_hi else f_hi
+
+
+#: a peak where the hammer's force spectrum lies this far below its level in the model's range is not a mode
+FORCE_NOTCH_DB = 20.0
+#: ... nor one where the mean coherence is below this
+PEAK_MIN_COHERENCE = 0.8
+
+
+def _excited(frf, frequency_hz: float, f_lo: float, f_hi: float) -> bool:
+    """Whether the hammer drove the structure at a peak outside the model's range.
+
+    H1 = S_fx / S_ff rises where the force spectrum has a notch (a half-sine
+    pulse of T s: the first at 1.5 / T, 12.5 kHz for 0.12 ms) and the
+    coherence there is poor: such a peak is the hammer's, and widening the
+    band to hold it would only add noisy bins to the fit (validation file
+    v2_side: band to 14.4 kHz, f_H std 16 Hz; to 7.2 kHz, 1.1 Hz).
+    """
+    f = np.asarray(frf.frequency_hz)
+    i = int(np.argmin(np.abs(f - frequency_hz)))
+    coherence = getattr(frf, "coherence", None)
+    if coherence is not None and float(np.mean(np.asarray(coherence)[i])) < PEAK_MIN_COHERENCE:
+        return False
+    sums = getattr(frf, "group_sums", None) or {}
+    if sums.get("Sff") is not None:
+        sff = np.asarray(sums["Sff"]).sum(axis=0)
+        inside = sff[(f >= f_lo) & (f <= f_hi)]
+        if inside.size and float(inside.max()) > 0 and sff[i] < float(inside.max()) * 10 ** (-FORCE_NOTCH_DB / 10):
+            return False
+    return True
 
 
 def assemble_motion(constants: dict, sensors: dict, drive: dict | None = None, iterations: int = 20,
@@ -549,21 +580,20 @@ def _candidate(gf, k, sensors, drive, mass) -> dict:
 
 
 def _labelled(gf, candidates, per_run, frf_by_run, geometry, model, warnings, band) -> ModalResult:
+    from guidefit import labels as lab_mod
     from guidefit import modeshapes as ident
 
-    by_share: dict = {}
-    if candidates and all(c["carriage_energy"] is not None for c in candidates):
-        labels, by_share = label_by_carriage_energy(candidates, model)
-    else:
-        labels = ident.label_modes(candidates, model) if candidates else []
+    views = {r: lab_mod.RunView(geometry[r].channels, geometry[r].excitation_direction,
+                                geometry[r].excitation_position_m) for r in gf.runs}
+    measured = [lab_mod.Measured(float(c["frequency_hz"]), c["constants"]) for c in candidates]
+    predicted = lab_mod.predicted_constants(model, views)
+    decided = lab_mod.label_modes(measured, views, model, predicted)
+    visible = dict(zip(model.labels, lab_mod.visible_modes(predicted)))
     modes, extras = [], []
-    for i, (c, label) in enumerate(zip(candidates, labels)):
+    for c, dec in zip(candidates, decided):
         k, m, run = c["k"], c["mode"], c["primary"]
-        amb, why = by_share.get(i), "a second mode of the same motion has nearly as much carriage energy"
-        if amb is None and c.get("unresolved"):
-            amb, why = list(c["unresolved"][0]), c["unresolved"][1]
-        if amb is None and label != "extra":
-            amb, why = _ambiguity(c["energy"], c["observed"], label, model.labels) or (None, "")
+        label = dec.label
+        amb = list(dec.candidates) if label == "ambiguous" else None
         frf = frf_by_run[run]
         view = gf.run_mode(k, run)
         names = [ch.name for ch in geometry[run].channels]
@@ -573,10 +603,10 @@ def _labelled(gf, candidates, per_run, frf_by_run, geometry, model, warnings, ba
                      for r, row in per_run.items() if (e := row[k]) is not None]
         parts = gf.std_parts[k]
         entry = ident.IdentifiedMode(
-            label="ambiguous" if amb else label, run=run, frequency_hz=float(m.frequency_hz),
+            label=label, run=run, frequency_hz=float(m.frequency_hz),
             damping_ratio=float(m.damping_ratio), frequency_std_hz=_finite(m.frequency_std_hz),
             damping_std=_finite(m.damping_std),
-            model_frequency_hz=model.frequency_hz(label) if (label in model.labels and not amb) else None,
+            model_frequency_hz=model.frequency_hz(label) if label in model.labels else None,
             shape=dict(zip(names, (float(v) for v in c["constants"][run]))),
             motion=tuple(float(v) for v in c["q"]), energy={kk: float(v) for kk, v in c["energy"].items()},
             coherence=ident._coherence_at(frf, view.peak_frequency_hz, view.residues),
@@ -587,16 +617,16 @@ def _labelled(gf, candidates, per_run, frf_by_run, geometry, model, warnings, ba
                     for r in gf.runs},
             std_parts={kk: {"frequency_hz": _finite(a), "damping_ratio": _finite(b)} for kk, (a, b) in parts.items()},
             global_index=k, carriage_energy=c["carriage_energy"],
+            label_basis=dec.basis, label_note=dec.note, label_mac=dec.mac, label_scale=dec.scale,
         )
         if amb:
-            text = " or ".join(f"{lab} ({share:.0%})" if math.isfinite(share) else f"{lab} (unobserved)"
-                               for lab, share in amb)
-            warnings.append(f"mode at {m.frequency_hz:.1f} Hz: label ambiguous: {text} ({why}); "
+            text = " or ".join(f"{lab} ({share:.0%})" for lab, share in amb)
+            warnings.append(f"mode at {m.frequency_hz:.1f} Hz: label ambiguous: {text} ({dec.note}); "
                             "not used for joint parameters")
             extras.append(entry)
         elif label == "extra":
             warnings.append(f"mode at {m.frequency_hz:.1f} Hz (strongest in run '{run}'): the model does not "
-                            "predict it (not paired with any carriage mode of the model)")
+                            f"predict it ({dec.note})")
             extras.append(entry)
         else:
             modes.append(entry)
@@ -607,6 +637,9 @@ def _labelled(gf, candidates, per_run, frf_by_run, geometry, model, warnings, ba
         if lab in told:
             warnings.append(f"model mode '{lab}' ({model.frequency_hz(lab):.0f} Hz) not told apart: a candidate of "
                             f"the ambiguous mode(s) at {', '.join(f'{f:.0f}' for f in told[lab])} Hz")
+        elif not visible.get(lab, True):
+            warnings.append(f"model mode '{lab}' ({model.frequency_hz(lab):.0f} Hz) cannot be seen on this layout: "
+                            "no run both excites it at its hit point and reads it at its sensors")
         else:
             warnings.append(f"model mode '{lab}' ({model.frequency_hz(lab):.0f} Hz) not observed in any run")
     missing = [lab for lab in missing if lab not in told]

@@ -47,6 +47,10 @@ class IdentifiedMode:
     std_parts: dict = field(default_factory=dict)  # fit / jackknife / selection std of f and zeta
     global_index: int | None = field(default=None, compare=False)  # index into the GlobalFit's modes
     carriage_energy: float | None = None  # share of the mode's kinetic energy in the carriage (q^T M q)
+    label_basis: str | None = None  # what decided the label: "shape", "frequency", "shape+frequency"
+    label_note: str = ""  # the labeller's plain sentence (guidefit.labels)
+    label_mac: float | None = None  # MAC with the model mode's predicted readings at the sensors
+    label_scale: float | None = None  # driving-point scale against the model mode (1: as predicted)
 
     def to_dict(self) -> dict:
         """JSON-ready; the contract's label/frequency_hz/damping_ratio plus extras."""
@@ -65,8 +69,12 @@ class IdentifiedMode:
             "shape": {k: float(np.real(v)) for k, v in self.shape.items()},
             "level": None,  # the all-hits estimate (force bins: force_levels, level 0, 1, ...)
             "estimates": [dict(e) for e in self.estimates],
-            "candidates": [{"label": lab, "energy_share": share if math.isfinite(share) else None}
-                           for lab, share in self.candidates],
+            "candidates": [{"label": lab, "probability": share if math.isfinite(share) else None,
+                            "energy_share": None} for lab, share in self.candidates],
+            "label_basis": self.label_basis,
+            "label_note": self.label_note,
+            "label_mac": self.label_mac,
+            "label_scale": self.label_scale,
             "shapes": {r: dict(v) for r, v in self.shapes.items()},
             "std_parts": {k: dict(v) for k, v in self.std_parts.items()},
             "motion": [float(v) for v in self.motion],

@@ -1,0 +1,480 @@
+r"""The one labeller: measured modes named by the model seen through the test's own sensors.
+
+A hammer test does not see the carriage's motion; it sees modal constants
+``A_r = phi(r) phi(e)`` at its sensors ``r`` for its hit point ``e``. For
+each run ``j`` and each mode ``i`` of the vibration model (Eq. 5-23,
+mass-normalised shape ``phi_i`` over u, v, theta, psi, phi) the test would
+read
+
+.. math::  r_{ij} = (S_j \phi_i)\,(g_j \cdot \phi_i)
+
+with ``S_j`` the run's sensor matrix (:func:`sensor_matrix`) and ``g_j`` the
+hammer's row (:func:`driving_row`). A measured mode ``k`` with real modal
+constants ``m_kj`` is compared with each ``r_i`` on the channels the runs
+have, all runs stacked, sign included:
+
+* **shape**: ``rho = 1 - MAC`` of ``m_k`` against ``a r_i`` with one scale
+  ``a`` for every run whose hit point is known (a run without one gets its
+  own scale: its participation is unknown), and the scale ``a`` itself (the
+  driving-point residue: 1 for the carriage mode on a well-scaled recording,
+  relative to the recording's common scale), negative ``a`` penalised;
+* **frequency**: ``ln(f_k / f_i)`` with a prior std of :data:`FREQUENCY_LOG_STD`
+  (wide enough for a soft rig that moves f_H by more than 50 %).
+
+The costs (negative log-likelihoods, up to constants) are added and one
+assignment of measured modes to model modes is solved over all of them at
+once (:func:`best_assignment`, exact); a measured mode may stay ``extra``
+(cost :data:`EXTRA_COST`) and a model mode may stay unmatched. A label is
+**decided** when every assignment that takes it away costs at least
+:data:`DECIDE_MARGIN` more; ``label_basis`` says what decides it:
+``"shape"``, ``"frequency"`` or ``"shape+frequency"`` (both, or only the two
+together). A mode is ``ambiguous`` only when the combined evidence does not
+decide it; model modes no run excites and observes are not offered
+(:func:`visible_modes`), and :func:`layout_view` tells before a test which
+labels a layout can decide by shape (``guidefit plan``).
+
+Examples
+--------
+>>> import numpy as np
+>>> from guidefit.model import vibration as vib
+>>> from guidefit.model.guides import load_guide
+>>> model = vib.solve_modes(vib.model_from_guide(load_guide("MRB35")))
+>>> ys = tuple(Sensor(f"acc_{p}_y", xyz, (0.0, 1.0, 0.0)) for p, xyz in
+...            (("A", (0.03, 0, 0.045)), ("B", (-0.03, 0, 0.045)), ("C", (-0.03, 0, -0.045)),
+...             ("D", (0.03, 0, -0.045))))
+>>> runs = {"vertical": RunView(ys, (0.0, -1.0, 0.0), (-0.01, 0.0, -0.025))}
+>>> pred = predicted_constants(model, runs)
+>>> i = model.labels.index("vertical")
+>>> measured = [Measured(model.frequencies_hz[i] * 1.01, {"vertical": pred[i]["vertical"]})]
+>>> [(lab.label, lab.basis) for lab in label_modes(measured, runs, model)]
+[('vertical', 'shape')]
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+#: prior std of ln(f_measured / f_model): a soft rig or a large added mass moves a mode by tens of percent
+FREQUENCY_LOG_STD = 0.3
+#: scale of 1 - MAC in the shape cost: a carriage mode distorted by a rig effect keeps 1 - MAC below ~0.1
+SHAPE_RHO_SCALE = 0.05
+#: prior std of ln(a / common scale) of the driving-point residue
+AMPLITUDE_LOG_STD = math.log(2.0)
+#: cost of a negative scale (measured mode in antiphase with the model mode at the hit point)
+SIGN_COST = 3.0
+#: cost of leaving a measured mode unlabelled (``extra``)
+EXTRA_COST = 8.0
+#: a label is decided when every assignment without it costs this much more (likelihood ratio e^2)
+DECIDE_MARGIN = 2.0
+#: a model mode whose predicted readings are below this fraction of the largest is not offered
+VISIBLE_FRACTION = 0.05
+#: the common scale is taken from measured modes whose best MAC is at least this
+SCALE_MAC = 0.8
+
+BASES = ("shape", "frequency", "shape+frequency")
+
+
+# --------------------------------------------------------------------------- the layout
+
+
+@dataclass(frozen=True)
+class Sensor:
+    """An accelerometer: channel name, position (m, carriage frame) and unit direction."""
+
+    name: str
+    position_m: tuple
+    direction: tuple
+
+
+def sensor_matrix(channels) -> np.ndarray:
+    """(n_channels, 5): each sensor's reading per unit carriage motion (u, v, theta, psi, phi).
+
+    The one sensor matrix of guidefit: a channel along unit ``d`` at ``p``
+    reads ``d . T(p) q`` (:func:`guidefit.model.vibration.rigid_body_map`).
+
+    >>> sensor_matrix([Sensor("acc_A_x", (0.03, 0.0, 0.045), (1.0, 0.0, 0.0))]).round(3)
+    array([[1.   , 0.   , 0.   , 0.045, 0.   ]])
+    """
+    from guidefit.model.vibration import rigid_body_map
+
+    rows = [np.asarray(ch.direction, float) @ rigid_body_map(ch.position_m) for ch in channels]
+    return np.array(rows, float).reshape(len(rows), 5)
+
+
+def driving_row(direction, position_m) -> np.ndarray | None:
+    """The hammer's row g (5,): its direction through the rigid-body map at the hit point; None when
+    the hit point is unknown (its participation is then not known either)."""
+    from guidefit.model.vibration import rigid_body_map
+
+    if position_m is None:
+        return None
+    return np.asarray(direction, float) @ rigid_body_map(np.asarray(position_m, float))
+
+
+@dataclass(frozen=True)
+class RunView:
+    """What the labeller needs of a run: its channels (in modal-constant order) and its hit."""
+
+    channels: tuple  # objects with position_m and direction (guidefit.recording.Channel)
+    excitation_direction: tuple
+    excitation_position_m: tuple | None = None
+
+    @property
+    def sensors(self) -> np.ndarray:
+        return sensor_matrix(self.channels)
+
+    @property
+    def drive(self) -> np.ndarray | None:
+        return driving_row(self.excitation_direction, self.excitation_position_m)
+
+
+def predicted_constants(model, runs: dict) -> list[dict]:
+    """Per model mode, run -> the modal constants (1/kg) the run's sensors would read for it.
+
+    ``r_ij = (S_j phi_i)(g_j . phi_i)``; for a run without a known hit point the
+    participation is taken as the largest ``|d . T(p) phi_i|`` over the run's own
+    sensor positions (a hammer hits near its sensors): a guess of the size only,
+    its scale is fitted freely (:func:`shape_fit`).
+    """
+    from guidefit.model.vibration import rigid_body_map
+
+    phi = np.asarray(model.shapes)[:5]
+    out = []
+    for i in range(phi.shape[1]):
+        entry = {}
+        for name, run in runs.items():
+            reading = run.sensors @ phi[:, i]
+            g = run.drive
+            if g is None:
+                d = np.asarray(run.excitation_direction, float)
+                part = max((abs(float(d @ rigid_body_map(ch.position_m) @ phi[:, i])) for ch in run.channels),
+                           default=0.0)
+            else:
+                part = float(g @ phi[:, i])
+            entry[name] = reading * part
+        out.append(entry)
+    return out
+
+
+def visible_modes(predicted: list[dict]) -> np.ndarray:
+    """bool per model mode: its predicted readings reach :data:`VISIBLE_FRACTION` of the largest mode's
+    (a mode no run both excites and observes cannot be found, so it is not offered as a label)."""
+    size = np.array([math.sqrt(sum(float(v @ v) for v in p.values())) for p in predicted])
+    top = float(size.max()) if size.size else 0.0
+    return size > VISIBLE_FRACTION * top if top > 0 else np.zeros(size.shape, bool)
+
+
+# --------------------------------------------------------------------------- the evidence
+
+
+@dataclass(frozen=True)
+class Measured:
+    """A measured mode: natural frequency (Hz) and its real modal constants per run (1/kg)."""
+
+    frequency_hz: float
+    constants: dict  # run -> (R_j,) real
+
+
+def shape_fit(measured: dict, predicted: dict, runs: dict) -> tuple[float, float | None]:
+    """(1 - MAC, scale a) of measured constants against a model mode's predicted ones, all runs stacked.
+
+    Runs with a known hit point share one scale ``a`` (returned); a run without
+    one gets its own. ``1 - MAC`` is the share of the measured constants the
+    best-scaled prediction leaves unexplained.
+    """
+    total = sum(float(np.dot(measured[r], measured[r])) for r in measured)
+    if total <= 0:
+        return 1.0, None
+    mr = rr = 0.0
+    explained = 0.0
+    for name in measured:
+        m, r = np.asarray(measured[name], float), np.asarray(predicted.get(name, 0.0 * measured[name]), float)
+        if runs[name].drive is None:
+            den = float(r @ r)
+            explained += float(m @ r) ** 2 / den if den > 0 else 0.0
+        else:
+            mr += float(m @ r)
+            rr += float(r @ r)
+    a = None
+    if rr > 0:
+        explained += mr * mr / rr
+        a = mr / rr
+    return min(max(1.0 - explained / total, 0.0), 1.0), a
+
+
+@dataclass(frozen=True)
+class Evidence:
+    """Cost matrices (measured x model mode) of the shape and the frequency, and what they came from."""
+
+    rho: np.ndarray  # 1 - MAC
+    scale: np.ndarray  # a / common scale (nan: no known hit point)
+    shape: np.ndarray  # shape cost (rho, scale, sign)
+    frequency: np.ndarray  # frequency cost
+    visible: np.ndarray  # bool per model mode
+    common_scale: float
+
+    @property
+    def combined(self) -> np.ndarray:
+        return self.shape + self.frequency
+
+
+def evidence(measured: list[Measured], runs: dict, model, predicted: list[dict] | None = None) -> Evidence:
+    """The shape and frequency costs of every measured mode against every model mode."""
+    predicted = predicted if predicted is not None else predicted_constants(model, runs)
+    n, m = len(measured), len(predicted)
+    rho, raw = np.ones((n, m)), np.full((n, m), np.nan)
+    for k, meas in enumerate(measured):
+        for i, pred in enumerate(predicted):
+            r, a = shape_fit(meas.constants, pred, runs)
+            rho[k, i], raw[k, i] = r, np.nan if a is None else a
+    # the recording's common scale: a force or sensitivity off by a factor scales every mode alike
+    best = [(rho[k].argmin(), k) for k in range(n)] if m else []
+    good = [raw[k, i] for i, k in best if 1.0 - rho[k, i] >= SCALE_MAC and np.isfinite(raw[k, i])]
+    common = float(np.median(good)) if len(good) >= 2 else (1.0 if not good or good[0] > 0 else -1.0)
+    common = common if abs(common) > 0 else 1.0
+    scale = raw / common
+    shape_cost = rho / SHAPE_RHO_SCALE
+    with np.errstate(divide="ignore", invalid="ignore"):
+        amp = np.where(np.isfinite(scale) & (scale != 0),
+                       np.log(np.abs(scale)) ** 2 / (2 * AMPLITUDE_LOG_STD**2), 0.0)
+    amp = np.where(np.isfinite(scale) & (scale == 0), EXTRA_COST, amp)
+    shape_cost = shape_cost + amp + np.where(np.isfinite(scale) & (scale < 0), SIGN_COST, 0.0)
+    f_meas = np.array([x.frequency_hz for x in measured], float).reshape(-1, 1)
+    f_model = np.asarray(model.frequencies_hz, float).reshape(1, -1)
+    freq_cost = np.log(f_meas / f_model) ** 2 / (2 * FREQUENCY_LOG_STD**2)
+    return Evidence(rho, scale, shape_cost, freq_cost, visible_modes(predicted), common)
+
+
+# --------------------------------------------------------------------------- the assignment
+
+
+def best_assignment(cost: np.ndarray, extra_cost) -> tuple[float, list]:
+    """The cheapest assignment of rows (measured modes) to distinct columns (model modes) or to none.
+
+    ``cost`` (n, m) with ``inf`` for a forbidden pair; ``extra_cost`` (n,) the
+    cost of row k taking no column (``inf``: it must take one). Returns the
+    total and each row's column (None: extra); ``(inf, [])`` when none is
+    possible. Exact, by dynamic programming over the set of columns used
+    (m <= 12, a carriage has five modes): written here rather than calling
+    :func:`scipy.optimize.linear_sum_assignment` because rows may stay
+    unassigned at their own cost, and so that identify does not import
+    :mod:`scipy.optimize` (0.2-0.6 s of every run).
+
+    >>> best_assignment(np.array([[1.0, 5.0], [2.0, 1.0]]), np.array([9.0, 9.0]))
+    (2.0, [0, 1])
+    >>> best_assignment(np.array([[1.0, 5.0], [2.0, 9.0]]), np.array([9.0, 0.5]))
+    (1.5, [0, None])
+    """
+    cost = np.asarray(cost, float)
+    n, m = cost.shape
+    extra = np.broadcast_to(np.asarray(extra_cost, float), (n,))
+    if m > 12:
+        raise ValueError(f"best_assignment: {m} columns; at most 12 (the DP is over subsets of columns)")
+    size = 1 << m
+    dp = np.full(size, np.inf)
+    dp[0] = 0.0
+    masks = np.arange(size)
+    choice = np.zeros((n, size), int)  # -1: extra, else the column taken
+    for k in range(n):
+        new = dp + extra[k]
+        pick = np.full(size, -1)
+        for i in range(m):
+            if not np.isfinite(cost[k, i]):
+                continue
+            bit = 1 << i
+            has = (masks & bit) != 0
+            cand = np.full(size, np.inf)
+            cand[has] = dp[masks[has] ^ bit] + cost[k, i]
+            better = cand < new
+            new[better] = cand[better]
+            pick[better] = i
+        dp, choice[k] = new, pick
+    end = int(np.argmin(dp))
+    total = float(dp[end])
+    if not np.isfinite(total):
+        return math.inf, []
+    out: list = [None] * n
+    mask = end
+    for k in range(n - 1, -1, -1):
+        i = int(choice[k, mask])
+        if i >= 0:
+            out[k] = i
+            mask ^= 1 << i
+    return total, out
+
+
+def _total(cost: np.ndarray, extra: np.ndarray, assignment: list) -> float:
+    return float(sum(extra[k] if i is None else cost[k, i] for k, i in enumerate(assignment)))
+
+
+def _margin(cost: np.ndarray, extra: np.ndarray, assignment: list, k: int, allow_extra: bool):
+    """(how much more the best assignment costs in which row k does not take its column, that assignment)."""
+    i = assignment[k]
+    c = cost.copy()
+    c[k, i] = np.inf
+    e = extra.copy()
+    if not allow_extra:
+        e[k] = np.inf
+    total, alt = best_assignment(c, e)
+    if not alt:
+        return math.inf, None
+    return total - _total(cost, extra, assignment), alt
+
+
+# --------------------------------------------------------------------------- the labels
+
+
+@dataclass(frozen=True)
+class Label:
+    """The label of one measured mode and what decided it."""
+
+    label: str  # a model label, "extra" or "ambiguous"
+    basis: str | None  # "shape", "frequency", "shape+frequency"; None for extra
+    model_label: str | None  # the best model label (also for an ambiguous mode)
+    mac: float | None  # MAC with the chosen model mode's predicted readings
+    scale: float | None  # driving-point scale a (relative to the recording's common scale)
+    margin: float  # cost margin of the decision (inf: no alternative)
+    candidates: tuple = ()  # ambiguous: ((label or "label at F Hz", probability), ...)
+    note: str = ""  # one plain sentence
+    costs: dict = field(default_factory=dict)  # shape / frequency / combined cost of the chosen pair
+
+
+def label_modes(measured: list[Measured], runs: dict, model, predicted: list[dict] | None = None) -> list[Label]:
+    """Label every measured mode at once (see the module docstring).
+
+    Parameters
+    ----------
+    measured : list of Measured
+    runs : dict run name -> RunView
+        The channels of each run in the order of the measured constants, and its hit.
+    model : guidefit.model.vibration.ModalSolution
+        The nominal model (labels, frequencies, mass-normalised shapes).
+
+    Returns
+    -------
+    list of Label, one per measured mode.
+    """
+    ev = evidence(measured, runs, model, predicted)
+    labels = list(model.labels)
+    n = len(measured)
+    offered = np.flatnonzero(ev.visible)
+    if n == 0:
+        return []
+    if offered.size == 0:
+        return [Label("extra", None, None, None, None, math.inf,
+                      note="no model mode is both excited and observed by these runs") for _ in measured]
+    comb, shp, frq = (x[:, offered] for x in (ev.combined, ev.shape, ev.frequency))
+    extra = np.full(n, EXTRA_COST)
+    _, assign = best_assignment(comb, extra)
+    out = []
+    for k in range(n):
+        j = assign[k]
+        if j is None:
+            i_best = int(offered[int(np.argmin(comb[k]))])
+            out.append(Label("extra", None, labels[i_best], 1.0 - float(ev.rho[k, i_best]), _fin(ev.scale[k, i_best]),
+                             math.inf, note=_extra_note(ev, k, i_best, labels)))
+            continue
+        i = int(offered[j])
+        d_comb, alt = _margin(comb, extra, assign, k, allow_extra=True)
+        d_shape, alt_s = _margin(shp, extra, assign, k, allow_extra=False)
+        d_freq, alt_f = _margin(frq, extra, assign, k, allow_extra=False)
+        by_shape, by_freq = d_shape >= DECIDE_MARGIN, d_freq >= DECIDE_MARGIN
+        basis = "shape+frequency" if (by_shape == by_freq) else ("shape" if by_shape else "frequency")
+        costs = {"shape": float(shp[k, j]), "frequency": float(frq[k, j]), "combined": float(comb[k, j])}
+        mac = 1.0 - float(ev.rho[k, i])
+        if d_comb < DECIDE_MARGIN:
+            other = _alternative(alt, k, offered, labels, measured)
+            p = 1.0 / (1.0 + math.exp(-max(d_comb, 0.0)))
+            cands = ((labels[i], p), (other, 1.0 - p))
+            note = (f"neither shape nor frequency tells {labels[i]} from {other} on these sensors "
+                    f"(evidence ratio {math.exp(max(d_comb, 0.0)):.1f}:1)")
+            out.append(Label("ambiguous", None, labels[i], mac, _fin(ev.scale[k, i]), float(d_comb), cands, note,
+                             costs))
+            continue
+        note = _decided_note(basis, labels[i], mac, measured[k].frequency_hz, float(model.frequencies_hz[i]),
+                             alt_s, alt_f, d_shape, d_freq, k, offered, labels)
+        out.append(Label(labels[i], basis, labels[i], mac, _fin(ev.scale[k, i]), float(d_comb), (), note, costs))
+    return out
+
+
+def _fin(x) -> float | None:
+    return float(x) if x is not None and np.isfinite(x) else None
+
+
+def _alternative(alt, k, offered, labels, measured) -> str:
+    """What row k's label would be in the alternative assignment (or who would take its label)."""
+    if alt is None:
+        return "extra"
+    if alt[k] is not None:
+        return labels[int(offered[alt[k]])]
+    return "extra"
+
+
+def _extra_note(ev, k, i_best, labels) -> str:
+    return (f"not paired with a carriage mode of the model (closest: {labels[i_best]}, MAC "
+            f"{1.0 - float(ev.rho[k, i_best]):.2f} with its predicted readings)")
+
+
+def _decided_note(basis, label, mac, f_meas, f_model, alt_s, alt_f, d_shape, d_freq, k, offered, labels) -> str:
+    shift = f"{100.0 * (f_meas / f_model - 1.0):+.1f} % from the model's {f_model:.0f} Hz"
+    alt_shape = labels[int(offered[alt_s[k]])] if alt_s and alt_s[k] is not None else None
+    if basis == "shape":
+        return f"{label} by its shape at the sensors (MAC {mac:.2f}); frequency {shift} does not decide"
+    if basis == "frequency":
+        why = f"these sensors read {label} and {alt_shape} alike" if alt_shape else "the shape does not decide"
+        return f"{label} by frequency only ({shift}): {why}"
+    if d_shape >= DECIDE_MARGIN and d_freq >= DECIDE_MARGIN:
+        return f"{label} by shape (MAC {mac:.2f}) and frequency ({shift})"
+    return f"{label} by shape (MAC {mac:.2f}) and frequency ({shift}) together; neither decides alone"
+
+
+# --------------------------------------------------------------------------- what a layout can tell
+
+
+@dataclass(frozen=True)
+class LayoutView:
+    """The model's modes as a layout will see them (``guidefit plan``): the labeller's own numbers."""
+
+    labels: tuple
+    frequencies_hz: tuple
+    participation: dict  # run -> (n_modes,) |g_j . phi_i| (None: hit point unknown)
+    readings: dict  # run -> (n_modes,) norm of the predicted modal constants at the run's sensors
+    visible: tuple  # bool per model mode
+    auto_mac: np.ndarray  # (n_modes, n_modes) MAC of the predicted readings, all runs stacked
+    decided: tuple  # per model mode: the Label the labeller gives its own predicted readings (None: not visible)
+
+    def basis(self, label: str) -> str | None:
+        i = self.labels.index(label)
+        d = self.decided[i]
+        return None if d is None else (d.basis if d.label == label else "ambiguous")
+
+
+def layout_view(model, runs: dict) -> LayoutView:
+    """What a layout can tell: participation, readings, auto-MAC, and the labeller run on the model's own
+    predicted readings (noise-free) at the model's frequencies: which labels shape decides."""
+    predicted = predicted_constants(model, runs)
+    n = len(predicted)
+    stacked = [np.concatenate([np.asarray(p[r], float) for r in runs]) if runs else np.zeros(0) for p in predicted]
+    mac = np.zeros((n, n))
+    for i in range(n):
+        for j in range(n):
+            den = float(stacked[i] @ stacked[i]) * float(stacked[j] @ stacked[j])
+            mac[i, j] = float(stacked[i] @ stacked[j]) ** 2 / den if den > 0 else 0.0
+    visible = visible_modes(predicted)
+    measured = [Measured(float(model.frequencies_hz[i]), predicted[i]) for i in range(n)]
+    idx = [i for i in range(n) if visible[i]]
+    own = label_modes([measured[i] for i in idx], runs, model, predicted) if idx else []
+    decided = [None] * n
+    for i, lab in zip(idx, own):
+        decided[i] = lab
+    phi = np.asarray(model.shapes)[:5]
+    part = {}
+    for r, v in runs.items():
+        g = v.drive
+        part[r] = None if g is None else np.abs(g @ phi)
+    readings = {r: np.array([float(np.linalg.norm(p[r])) for p in predicted]) for r in runs}
+    return LayoutView(tuple(model.labels), tuple(float(f) for f in model.frequencies_hz), part, readings,
+                      tuple(bool(x) for x in visible), mac, tuple(decided))
