@@ -202,6 +202,33 @@ def predict(guide_name, load_text, sweep_text, calibration, as_json, plot_path):
     report.render_prediction(result, as_json=as_json, plot_path=plot_path)
 
 
+@main.command(name="plan")
+@click.argument("setup", required=False, type=click.Path(dir_okay=False))
+@click.option("--guide", "guide_name", help="Built-in guide name or guide TOML [default: the setup's, else MRB35].")
+@click.option("--sensors", "layout", metavar="LAYOUT",
+              help="A sensor layout instead of a setup: default (A-D, one axis per run), both, triax:A,C, side, "
+                   "pair, single, or a layout TOML.")
+@click.option("--hit", "hit_texts", multiple=True, metavar="RUN:x,y,z", help="Move a run's hammer point (m).")
+@click.option("--no-search", is_flag=True, help="Skip the search for the best hit points and layout.")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON document.")
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False), help="Write the auto-MAC matrix (PNG).")
+def plan_cmd(setup, guide_name, layout, hit_texts, no_search, as_json, plot_path):
+    """Before the test: which modes each run excites and reads, and which labels the layout decides by shape.
+
+    SETUP is a test setup TOML (its DAQ files need not exist yet) or a recording; without it,
+    --sensors on the default runs (vertical hit along -y on the top face, lateral along -x on the side).
+    """
+    from guidefit import layouts, report
+    from guidefit.plan import plan
+
+    _refuse([plot_path], [setup, _guide_file(guide_name)])
+    if plot_path and not plot_path.lower().endswith(".png"):
+        raise click.BadParameter(f"'{plot_path}': the plot is a PNG file (.png)", param_hint="--plot")
+    hits = dict(layouts.parse_hit(t) for t in hit_texts)
+    result = plan(setup, guide=guide_name, layout=layout, hits=hits, search=not no_search)
+    report.render_plan(result, as_json=as_json, plot_path=plot_path)
+
+
 def _named_guide_error(path, exc):
     """A guide error caused by the guide a file names (no --guide given): say which file."""
     from guidefit.errors import GuideError

@@ -251,13 +251,13 @@ def evidence(measured: list[Measured], runs: dict, model, predicted: list[dict] 
 # --------------------------------------------------------------------------- the assignment
 
 
-def best_assignment(cost: np.ndarray, extra_cost) -> tuple[float, list]:
+def best_assignment(cost: np.ndarray, extra_cost, require: tuple = ()) -> tuple[float, list]:
     """The cheapest assignment of rows (measured modes) to distinct columns (model modes) or to none.
 
     ``cost`` (n, m) with ``inf`` for a forbidden pair; ``extra_cost`` (n,) the
     cost of row k taking no column (``inf``: it must take one). Returns the
     total and each row's column (None: extra); ``(inf, [])`` when none is
-    possible. Exact, by dynamic programming over the set of columns used
+    possible. Columns in ``require`` must be taken. Exact, by dynamic programming over the set of columns used
     (m <= 12, a carriage has five modes): written here rather than calling
     :func:`scipy.optimize.linear_sum_assignment` because rows may stay
     unassigned at their own cost, and so that identify does not import
@@ -292,6 +292,9 @@ def best_assignment(cost: np.ndarray, extra_cost) -> tuple[float, list]:
             new[better] = cand[better]
             pick[better] = i
         dp, choice[k] = new, pick
+    if require:
+        need = sum(1 << int(i) for i in require)
+        dp = np.where((masks & need) == need, dp, np.inf)
     end = int(np.argmin(dp))
     total = float(dp[end])
     if not np.isfinite(total):
@@ -311,14 +314,24 @@ def _total(cost: np.ndarray, extra: np.ndarray, assignment: list) -> float:
 
 
 def _margin(cost: np.ndarray, extra: np.ndarray, assignment: list, k: int, allow_extra: bool):
-    """(how much more the best assignment costs in which row k does not take its column, that assignment)."""
+    """(how much more the best assignment costs in which row k takes another column, that assignment).
+
+    With ``allow_extra`` row k may also stay extra, but then another row must
+    take its column: "this mode is not a carriage mode" alone (k extra, its
+    label unmatched) is not another label.
+    """
     i = assignment[k]
     c = cost.copy()
     c[k, i] = np.inf
     e = extra.copy()
-    if not allow_extra:
-        e[k] = np.inf
+    e[k] = np.inf
     total, alt = best_assignment(c, e)
+    if allow_extra:
+        c2 = cost.copy()
+        c2[k, :] = np.inf
+        total2, alt2 = best_assignment(c2, extra, require=(i,))
+        if alt2 and total2 < total:
+            total, alt = total2, alt2
     if not alt:
         return math.inf, None
     return total - _total(cost, extra, assignment), alt
@@ -340,6 +353,13 @@ class Label:
     candidates: tuple = ()  # ambiguous: ((label or "label at F Hz", probability), ...)
     note: str = ""  # one plain sentence
     costs: dict = field(default_factory=dict)  # shape / frequency / combined cost of the chosen pair
+    shape_margin: float = math.nan  # what the shape alone would lose by another label (>= DECIDE_MARGIN: decides)
+    frequency_margin: float = math.nan  # the same for the frequency alone
+
+    @property
+    def by_shape(self) -> bool:
+        """The shape alone decides this label."""
+        return self.shape_margin >= DECIDE_MARGIN
 
 
 def label_modes(measured: list[Measured], runs: dict, model, predicted: list[dict] | None = None) -> list[Label]:
@@ -386,17 +406,21 @@ def label_modes(measured: list[Measured], runs: dict, model, predicted: list[dic
         costs = {"shape": float(shp[k, j]), "frequency": float(frq[k, j]), "combined": float(comb[k, j])}
         mac = 1.0 - float(ev.rho[k, i])
         if d_comb < DECIDE_MARGIN:
-            other = _alternative(alt, k, offered, labels, measured)
+            other = _alternative(alt, k, j, offered, labels, measured)
             p = 1.0 / (1.0 + math.exp(-max(d_comb, 0.0)))
-            cands = ((labels[i], p), (other, 1.0 - p))
-            note = (f"neither shape nor frequency tells {labels[i]} from {other} on these sensors "
+            mine = labels[i]
+            if other.startswith(f"{labels[i]} at "):  # another mode would take the label
+                mine = f"{labels[i]} at {measured[k].frequency_hz:.0f} Hz"
+            cands = ((mine, p), (other, 1.0 - p))
+            note = (f"neither shape nor frequency tells {mine} from {other} on these sensors "
                     f"(evidence ratio {math.exp(max(d_comb, 0.0)):.1f}:1)")
             out.append(Label("ambiguous", None, labels[i], mac, _fin(ev.scale[k, i]), float(d_comb), cands, note,
-                             costs))
+                             costs, float(d_shape), float(d_freq)))
             continue
         note = _decided_note(basis, labels[i], mac, measured[k].frequency_hz, float(model.frequencies_hz[i]),
                              alt_s, alt_f, d_shape, d_freq, k, offered, labels)
-        out.append(Label(labels[i], basis, labels[i], mac, _fin(ev.scale[k, i]), float(d_comb), (), note, costs))
+        out.append(Label(labels[i], basis, labels[i], mac, _fin(ev.scale[k, i]), float(d_comb), (), note, costs,
+                         float(d_shape), float(d_freq)))
     return out
 
 
@@ -404,17 +428,20 @@ def _fin(x) -> float | None:
     return float(x) if x is not None and np.isfinite(x) else None
 
 
-def _alternative(alt, k, offered, labels, measured) -> str:
-    """What row k's label would be in the alternative assignment (or who would take its label)."""
+def _alternative(alt, k, j, offered, labels, measured) -> str:
+    """What row k's label would be in the alternative assignment, or which mode would take its label."""
     if alt is None:
         return "extra"
     if alt[k] is not None:
         return labels[int(offered[alt[k]])]
-    return "extra"
+    other = next((kk for kk, jj in enumerate(alt) if jj == j), None)
+    if other is None:
+        return "extra"
+    return f"{labels[int(offered[j])]} at {measured[other].frequency_hz:.0f} Hz"
 
 
 def _extra_note(ev, k, i_best, labels) -> str:
-    return (f"not paired with a carriage mode of the model (closest: {labels[i_best]}, MAC "
+    return (f"not paired with any carriage mode of the model (closest: {labels[i_best]}, MAC "
             f"{1.0 - float(ev.rho[k, i_best]):.2f} with its predicted readings)")
 
 

@@ -235,6 +235,87 @@ def plot_sweep(frame, path: str) -> None:
     plt.close(fig)
 
 
+# --------------------------------------------------------------------------- plan
+
+
+def render_plan(result, as_json: bool = False, plot_path: str | None = None, console=None) -> None:
+    """Print a :class:`guidefit.plan.Plan`: per mode what each run excites and reads and what will
+    decide its label, the auto-MAC, the best layout; or one JSON document; optional auto-MAC plot."""
+    data = result.to_dict()
+    if plot_path:
+        _save_figure(lambda path: plot_plan(result, path), plot_path)
+    if as_json:
+        print(dump_json(data))
+        return
+    console = console or _console()
+    runs = [r["name"] for r in data["runs"]]
+    for r in data["runs"]:
+        hit = "unknown" if r["excitation_position_m"] is None else \
+            "(" + ", ".join(f"{1e3 * x:.1f}" for x in r["excitation_position_m"]) + ") mm"
+        console.print(f"run {r['name']}: hit along ({', '.join(f'{x:g}' for x in r['excitation_direction'])}) at "
+                      f"{hit}; sensors {', '.join(s['name'] for s in r['sensors']) or 'none'}", highlight=False)
+    table = _narrow_table(f"{data['guide']} modes as this test will see them")
+    table.add_column("mode")
+    table.add_column("f (Hz)", justify="right")
+    for r in runs:
+        table.add_column(f"{r}: hit/read", justify="right")
+    table.add_column("label by")
+    top_p = max((p for m in data["modes"] for p in m["participation"].values() if p is not None), default=0) or 1
+    top_r = max((x for m in data["modes"] for x in m["readings"].values()), default=0) or 1
+    for m in data["modes"]:
+        cells = [m["label"], f"{m['frequency_hz']:.0f}"]
+        for r in runs:
+            p = m["participation"][r]
+            cells.append(("?" if p is None else f"{100 * p / top_p:.0f}%") + f"/{100 * m['readings'][r] / top_r:.0f}%")
+        cells.append(m["label_basis"])
+        table.add_row(*cells)
+    console.print(table)
+    console.print("hit: participation |g.phi| of the mode at the hit point; read: size of its modal constants at "
+                  "the run's sensors (both relative to the largest). label by: what will name the mode from "
+                  "this test's data (shape: the readings alone; frequency: only its place near the model's).",
+                  highlight=False)
+    for m in data["modes"]:
+        if m["label_basis"] not in ("shape", "shape+frequency"):
+            console.print(f"  {m['label']}: {m['note']}", highlight=False)
+    mac = data["auto_mac"]
+    mt = _narrow_table("auto-MAC of the model modes on these sensors (1: they look alike)")
+    mt.add_column("")
+    for lab in mac["labels"]:
+        mt.add_column(lab[:9], justify="right")
+    for lab, row in zip(mac["labels"], mac["matrix"]):
+        mt.add_row(lab, *(f"{x:.2f}" for x in row))
+    console.print(mt)
+    best = data.get("best")
+    if best:
+        hits = "; ".join(f"{r} at (" + ", ".join(f"{1e3 * x:.1f}" for x in h) + ") mm" for r, h in best["hits"].items())
+        console.print(f"best among the guide's points: layout {best['layout']} with hits {hits}: "
+                      f"{best['decided_by_shape']} of {len(data['modes'])} labels decided by shape alone "
+                      f"(this plan: {len(data['decided_by_shape'])})", highlight=False)
+    if plot_path:
+        console.print(f"plot written to {plot_path}")
+
+
+def plot_plan(result, path: str) -> None:
+    """The auto-MAC matrix of the model modes on the planned sensors."""
+    import matplotlib.pyplot as plt
+
+    v = result.view
+    fig, axes = _figure(1, 1, (5.5, 4.8))
+    ax = axes[0, 0]
+    im = ax.imshow(v.auto_mac, vmin=0.0, vmax=1.0, cmap="viridis")
+    ax.set_xticks(range(len(v.labels)), v.labels, rotation=45, ha="right")
+    ax.set_yticks(range(len(v.labels)), v.labels)
+    for i in range(len(v.labels)):
+        for j in range(len(v.labels)):
+            ax.text(j, i, f"{v.auto_mac[i, j]:.2f}", ha="center", va="center",
+                    color="black" if v.auto_mac[i, j] > 0.5 else "white", fontsize=8)
+    ax.set_title(f"{result.guide}: auto-MAC on the planned sensors")
+    fig.colorbar(im, ax=ax)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 # --------------------------------------------------------------------------- identify
 
 _PARAM_ORDER = ("f_V", "zeta_V", "K_V", "c_V", "f_H", "zeta_H", "K_H", "c_H")

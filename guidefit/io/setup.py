@@ -257,7 +257,8 @@ def _daq_formats() -> dict:
     return {s: f for f in formats("daq") if f.read for s in f.suffixes}
 
 
-def _check_file(value, where: str, setup_path: Path, setup_display: str) -> tuple[Path, str, FileFormat]:
+def _check_file(value, where: str, setup_path: Path, setup_display: str,
+                planning: bool = False) -> tuple[Path, str, FileFormat]:
     if value is None:
         raise SetupError(f"{where}: file missing; expected the run's DAQ file, relative to the setup")
     text = _text(value, where, "file")
@@ -273,6 +274,8 @@ def _check_file(value, where: str, setup_path: Path, setup_display: str) -> tupl
             f"{where}: file '{text}' has suffix '{Path(text).suffix}', not a DAQ file type; expected "
             f"{', '.join(sorted(known))}{hint}"
         )
+    if planning:  # guidefit plan: the test has not been made yet
+        return path, display, known[suffix]
     try:
         mode = os.stat(path).st_mode
     except OSError:
@@ -286,7 +289,7 @@ def _check_file(value, where: str, setup_path: Path, setup_display: str) -> tupl
     return path, display, known[suffix]
 
 
-def _check_run(name: str, table, channels: dict, setup_path: Path, display: str) -> SetupRun:
+def _check_run(name: str, table, channels: dict, setup_path: Path, display: str, planning: bool = False) -> SetupRun:
     where = f"{display}: runs.{name}"
     if not _valid_run_name(name):
         raise SetupError(f"{where}: run name not allowed; expected text without '/', line breaks or outer spaces")
@@ -295,7 +298,7 @@ def _check_run(name: str, table, channels: dict, setup_path: Path, display: str)
     _unknown_keys(table, RUN_KEYS, where)
     if "file" not in table:
         raise SetupError(f"{where}: file missing; expected the run's DAQ file, relative to the setup")
-    path, file_display, fmt = _check_file(table["file"], where, setup_path, display)
+    path, file_display, fmt = _check_file(table["file"], where, setup_path, display, planning)
     group = table.get("group")
     if group is not None and not (isinstance(group, str) and group.strip()) and not (
         isinstance(group, int) and not isinstance(group, bool) and group >= 0
@@ -364,13 +367,15 @@ def _text_keys(table: dict, fmt: FileFormat, file_display: str, where: str):
     return delimiter, decimal
 
 
-def load_setup(path) -> Setup:
+def load_setup(path, planning: bool = False) -> Setup:
     """Parse and check a test setup; no DAQ file is opened (only their existence is checked).
 
     Parameters
     ----------
     path : str or path-like
         The ``.toml`` setup.
+    planning : bool
+        The DAQ files need not exist yet (``guidefit plan`` before the test).
 
     Raises
     ------
@@ -430,7 +435,7 @@ def load_setup(path) -> Setup:
         )
     if not isinstance(runs_table, dict) or not runs_table:
         raise SetupError(f"{display}: runs must hold tables [runs.<name>], got {_show(runs_table)}")
-    runs = tuple(_check_run(name, table, channels, p, display) for name, table in runs_table.items())
+    runs = tuple(_check_run(name, table, channels, p, display, planning) for name, table in runs_table.items())
     return Setup(display, guide, description, channels, runs)
 
 
