@@ -870,7 +870,8 @@ def _identify_global(path, source, guide, model, settings) -> Identification:
                 if r.modes else r for r in runs]
     modes = res.modes if res is not None else []
     joint = {k: next((m for m in modes if m.label == lab), None) for k, lab in JOINT_LABELS.items()}
-    if joint["V"] is None and joint["H"] is None:
+    neither = joint["V"] is None and joint["H"] is None
+    if neither and (res is None or not (res.modes or res.extras)):
         why = [w for w in warnings if " hit " not in w.split(":", 1)[0]]
         raise IdentificationError(f"{path}: neither the vertical nor the horizontal joint mode was found"
                                   + (f" ({'; '.join(why)})" if why else ""))
@@ -878,7 +879,13 @@ def _identify_global(path, source, guide, model, settings) -> Identification:
     _quality_warnings(modes, settings, warnings)
     _excitation_warnings(modes, frf_by_run, warnings)
     params = joint_parameters(guide.mass_kg, joint)
-    gate = consistency.plausibility(modes, res.missing, check.sets, model)
+    # modes that are found but not named (ambiguous) count as missing for the gate
+    not_named = [lab for lab in model.labels if lab not in {m.label for m in modes} and not lab.startswith("support")]
+    gate = consistency.plausibility(modes, not_named, check.sets, model)
+    if gate is None and neither:  # modes found, none of them the vertical or the horizontal joint mode
+        gate = (f"neither the vertical nor the horizontal joint mode was found among the {len(res.modes)} "
+                f"labelled and {len(res.extras)} other modes: the recording does not look like a carriage on "
+                "this guide, or its sensors cannot tell its modes apart (guidefit plan shows what they can)")
     warnings.extend(consistency.global_mass_warnings(runs, check.sets, guide, model))
     if gate is not None:
         params = joint_parameters(guide.mass_kg, {})

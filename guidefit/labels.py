@@ -73,6 +73,10 @@ DECIDE_MARGIN = 2.0
 VISIBLE_FRACTION = 0.05
 #: the common scale is taken from measured modes whose best MAC is at least this
 SCALE_MAC = 0.8
+#: ... and used only when it is off by more than this factor (a unit error, not physics or calibration)
+COMMON_SCALE_FACTOR = 3.0
+#: prior std (rad) of the mixing angle of a two-mode group (the roll pair) away from the model's
+MIXING_ANGLE_STD = 0.35
 
 BASES = ("shape", "frequency", "shape+frequency")
 
@@ -178,40 +182,70 @@ class Measured:
     constants: dict  # run -> (R_j,) real
 
 
-def shape_fit(measured: dict, predicted: dict, runs: dict) -> tuple[float, float | None]:
-    """(1 - MAC, scale a) of measured constants against a model mode's predicted ones, all runs stacked.
+def motion_groups(model) -> list[list[int]]:
+    """The model's modes grouped by the motion that dominates them (v, theta, psi, u-phi): a rig effect
+    (a soft lateral support, a mass at a corner) mixes the modes of one group (the roll pair turns in the
+    u-phi plane) far more than it mixes groups."""
+    energy = np.asarray(model.energy_fractions)[:, :4]
+    dominant = np.argmax(energy, axis=1)
+    return [list(np.flatnonzero(dominant == g)) for g in range(4) if np.any(dominant == g)]
 
-    Runs with a known hit point share one scale ``a`` (returned); a run without
-    one gets its own. ``1 - MAC`` is the share of the measured constants the
-    best-scaled prediction leaves unexplained.
-    """
-    total = sum(float(np.dot(measured[r], measured[r])) for r in measured)
-    if total <= 0:
-        return 1.0, None
-    mr = rr = 0.0
-    explained = 0.0
-    for name in measured:
-        m, r = np.asarray(measured[name], float), np.asarray(predicted.get(name, 0.0 * measured[name]), float)
-        if runs[name].drive is None:
-            den = float(r @ r)
-            explained += float(m @ r) ** 2 / den if den > 0 else 0.0
+
+#: grid of mixing angles (rad) in a two-mode group
+_ANGLES = np.linspace(0.0, math.pi, 181)[:-1]
+
+
+def _readings(runs: dict, names, phi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Predicted modal constants of motions ``phi`` (5, T), stacked over runs (T, R), and the run index of
+    each reading (-1: hit point known; else the run's number, whose scale is free)."""
+    cols, owner = [], []
+    for n, name in enumerate(names):
+        run = runs[name]
+        S = run.sensors
+        reading = phi.T @ S.T  # (T, R_j)
+        g = run.drive
+        if g is None:
+            d = np.asarray(run.excitation_direction, float)
+            from guidefit.model.vibration import rigid_body_map
+
+            parts = np.array([d @ rigid_body_map(ch.position_m) @ phi for ch in run.channels]).reshape(-1, phi.shape[1])
+            part = np.abs(parts).max(axis=0) if parts.size else np.zeros(phi.shape[1])
+            owner += [n] * S.shape[0]
         else:
-            mr += float(m @ r)
-            rr += float(r @ r)
-    a = None
-    if rr > 0:
-        explained += mr * mr / rr
-        a = mr / rr
-    return min(max(1.0 - explained / total, 0.0), 1.0), a
+            part = g @ phi
+            owner += [-1] * S.shape[0]
+        cols.append(reading * part[:, None])
+    return np.hstack(cols) if cols else np.zeros((phi.shape[1], 0)), np.array(owner, int)
+
+
+def _profile(m: np.ndarray, R: np.ndarray, owner: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For each row of R (T, n) the unexplained share of ``m`` (n,) after the best scale(s), and the common
+    scale of the known-hit readings (nan where there are none)."""
+    total = float(m @ m)
+    known = owner < 0
+    explained = np.zeros(R.shape[0])
+    scale = np.full(R.shape[0], np.nan)
+    if np.any(known):
+        mr, rr = R[:, known] @ m[known], np.einsum("ij,ij->i", R[:, known], R[:, known])
+        ok = rr > 0
+        explained[ok] += mr[ok] ** 2 / rr[ok]
+        scale[ok] = mr[ok] / rr[ok]
+    for n in np.unique(owner[~known]):
+        sel = owner == n
+        mr, rr = R[:, sel] @ m[sel], np.einsum("ij,ij->i", R[:, sel], R[:, sel])
+        ok = rr > 0
+        explained[ok] += mr[ok] ** 2 / rr[ok]
+    rho = np.clip(1.0 - explained / total, 0.0, 1.0) if total > 0 else np.ones(R.shape[0])
+    return rho, scale
 
 
 @dataclass(frozen=True)
 class Evidence:
     """Cost matrices (measured x model mode) of the shape and the frequency, and what they came from."""
 
-    rho: np.ndarray  # 1 - MAC
-    scale: np.ndarray  # a / common scale (nan: no known hit point)
-    shape: np.ndarray  # shape cost (rho, scale, sign)
+    rho: np.ndarray  # 1 - MAC with the best motion of the model mode's group
+    scale: np.ndarray  # modal scale s^2 (carriage share of the mode) relative to the common scale (nan: unknown)
+    shape: np.ndarray  # shape cost (rho, mixing angle, scale, sign), profiled over the group's mixing angle
     frequency: np.ndarray  # frequency cost
     visible: np.ndarray  # bool per model mode
     common_scale: float
@@ -221,31 +255,67 @@ class Evidence:
         return self.shape + self.frequency
 
 
-def evidence(measured: list[Measured], runs: dict, model, predicted: list[dict] | None = None) -> Evidence:
-    """The shape and frequency costs of every measured mode against every model mode."""
-    predicted = predicted if predicted is not None else predicted_constants(model, runs)
-    n, m = len(measured), len(predicted)
-    rho, raw = np.ones((n, m)), np.full((n, m), np.nan)
-    for k, meas in enumerate(measured):
-        for i, pred in enumerate(predicted):
-            r, a = shape_fit(meas.constants, pred, runs)
-            rho[k, i], raw[k, i] = r, np.nan if a is None else a
-    # the recording's common scale: a force or sensitivity off by a factor scales every mode alike
-    best = [(rho[k].argmin(), k) for k in range(n)] if m else []
-    good = [raw[k, i] for i, k in best if 1.0 - rho[k, i] >= SCALE_MAC and np.isfinite(raw[k, i])]
-    common = float(np.median(good)) if len(good) >= 2 else (1.0 if not good or good[0] > 0 else -1.0)
-    common = common if abs(common) > 0 else 1.0
-    scale = raw / common
-    shape_cost = rho / SHAPE_RHO_SCALE
+def _amplitude_cost(scale: np.ndarray) -> np.ndarray:
+    """Prior on the modal scale s^2 (1: all the mode's kinetic energy in the carriage), sign included."""
     with np.errstate(divide="ignore", invalid="ignore"):
-        amp = np.where(np.isfinite(scale) & (scale != 0),
-                       np.log(np.abs(scale)) ** 2 / (2 * AMPLITUDE_LOG_STD**2), 0.0)
-    amp = np.where(np.isfinite(scale) & (scale == 0), EXTRA_COST, amp)
-    shape_cost = shape_cost + amp + np.where(np.isfinite(scale) & (scale < 0), SIGN_COST, 0.0)
+        cost = np.log(np.abs(scale)) ** 2 / (2 * AMPLITUDE_LOG_STD**2)
+    cost = np.where(np.isfinite(scale) & (scale == 0), EXTRA_COST, cost)
+    cost = np.where(np.isfinite(scale), cost, 0.0)
+    return cost + np.where(np.isfinite(scale) & (scale < 0), SIGN_COST, 0.0)
+
+
+def evidence(measured: list[Measured], runs: dict, model, predicted: list[dict] | None = None) -> Evidence:
+    """The shape and frequency costs of every measured mode against every model mode.
+
+    The shape of model mode ``i`` is tested as the best motion of its group
+    (:func:`motion_groups`): for a two-mode group (the roll pair) the motion
+    ``cos t phi_a + sin t phi_b`` over every mixing angle ``t``, with a prior
+    of :data:`MIXING_ANGLE_STD` on the angle away from mode ``i``'s own; the
+    cost is profiled over ``t`` (a layout that cannot see the mix leaves both
+    labels of the pair equally likely by shape).
+    """
+    predicted = predicted if predicted is not None else predicted_constants(model, runs)
+    names = list(runs)
+    n, n_model = len(measured), len(predicted)
+    phi = np.asarray(model.shapes)[:5]
+    stacked = [np.concatenate([np.asarray(x.constants.get(r, np.zeros(len(runs[r].channels))), float)
+                               for r in names]) for x in measured]
+    rho = np.ones((n, n_model))
+    raw = np.full((n, n_model), np.nan)
+    angle_cost = np.zeros((n, n_model))
+    fits = {}  # (k, i) -> (rho over angles, scale over angles, angle prior cost over angles)
+    for group in motion_groups(model):
+        if len(group) == 2:
+            a, b = group
+            basis = np.outer(phi[:, a], np.cos(_ANGLES)) + np.outer(phi[:, b], np.sin(_ANGLES))
+            own = {a: np.minimum(_ANGLES, math.pi - _ANGLES), b: np.abs(_ANGLES - math.pi / 2)}
+        else:  # one mode (or a group too large to scan): each mode its own motion
+            basis, own = None, None
+        for i in group:
+            B = phi[:, [i]] if basis is None else basis
+            R, owner = _readings(runs, names, B)
+            prior = np.zeros(B.shape[1]) if own is None else own[i] ** 2 / (2 * MIXING_ANGLE_STD**2)
+            for k in range(n):
+                r, sc = _profile(stacked[k], R, owner)
+                fits[k, i] = (r, sc, prior)
+    # the recording's common scale: a force or sensitivity off by a unit factor scales every mode alike
+    for (k, i), (r, sc, prior) in fits.items():
+        j = int(np.argmin(r / SHAPE_RHO_SCALE + prior))
+        rho[k, i], raw[k, i] = r[j], sc[j]
+    best = [(int(np.argmin(rho[k])), k) for k in range(n)] if n_model else []
+    good = [raw[k, i] for i, k in best if 1.0 - rho[k, i] >= SCALE_MAC and np.isfinite(raw[k, i])]
+    common = float(np.median(good)) if len(good) >= 2 else (float(good[0]) if good else 1.0)
+    if not (abs(common) > 0 and abs(math.log(abs(common))) > math.log(COMMON_SCALE_FACTOR)):
+        common = math.copysign(1.0, common) if common else 1.0  # within a calibration error: the physics'
+    shape_cost = np.zeros((n, n_model))
+    for (k, i), (r, sc, prior) in fits.items():
+        total = r / SHAPE_RHO_SCALE + prior + _amplitude_cost(sc / common)
+        j = int(np.argmin(total))
+        shape_cost[k, i], rho[k, i], raw[k, i], angle_cost[k, i] = total[j], r[j], sc[j], prior[j]
     f_meas = np.array([x.frequency_hz for x in measured], float).reshape(-1, 1)
     f_model = np.asarray(model.frequencies_hz, float).reshape(1, -1)
     freq_cost = np.log(f_meas / f_model) ** 2 / (2 * FREQUENCY_LOG_STD**2)
-    return Evidence(rho, scale, shape_cost, freq_cost, visible_modes(predicted), common)
+    return Evidence(rho, raw / common, shape_cost, freq_cost, visible_modes(predicted), common)
 
 
 # --------------------------------------------------------------------------- the assignment
