@@ -273,6 +273,8 @@ class SimulationConfig:
         out = asdict(self)
         out["runs"] = [asdict(r) for r in self.runs]
         out["faults"] = [{"name": f.name, "parameters": dict(f.parameters)} for f in _faults(self)]
+        if self.sensor_layout is not None:
+            out["sensor_layout"] = os.fspath(self.sensor_layout)  # a layout file given as a Path
         return out
 
 

@@ -289,3 +289,14 @@ def test_cli_bad_toml_layout_exits_2_naming_the_key(tmp_path):
     result = CliRunner().invoke(main, ["simulate", "--out", str(tmp_path / "x.h5"), "--sensors", str(bad)])
     assert result.exit_code == 2
     assert result.stderr.count("\n") == 1 and "key 'direction'" in result.stderr and "Traceback" not in result.output
+
+
+def test_a_layout_file_given_as_a_path_is_recorded_as_text(tmp_path):
+    from guidefit.simulate import write_simulation
+
+    path = tmp_path / "rig.toml"
+    path.write_text(RIG)
+    out = write_simulation(tmp_path / "x.h5", MRB35, config=SimulationConfig(hits=1, record_s=0.002,
+                                                                             sensor_layout=path).ideal())
+    assert out.truth["config"]["sensor_layout"] == str(path)
+    assert [s["name"] for s in out.truth["runs"]["lateral"]["sensors"]] == ["acc_E_x", "acc_K_y"]
