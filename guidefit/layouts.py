@@ -81,6 +81,27 @@ _SENSOR_KEYS = ("name", "position_m", "direction", "runs")
 
 
 @dataclass(frozen=True)
+class HammerRun:
+    """One excitation set-up: run name, hit point (m, carriage frame) and force direction.
+
+    Also ``guidefit.simulate.HammerRun``.
+    """
+
+    name: str
+    position_m: tuple[float, float, float]
+    direction: tuple[float, float, float]
+
+
+#: 'vertical': near the top centre, slightly off-centre so that pitch and roll are
+#: weakly excited too, force downwards; 'lateral': on the carriage side below the
+#: top face, force along -x.
+DEFAULT_RUNS = (
+    HammerRun("vertical", (0.004, 0.0, 0.008), (0.0, -1.0, 0.0)),
+    HammerRun("lateral", (0.05, -0.012, 0.006), (-1.0, 0.0, 0.0)),
+)
+
+
+@dataclass(frozen=True)
 class SensorSpec:
     """One accelerometer: channel name, position (m, carriage frame), unit direction.
 
@@ -126,7 +147,7 @@ def side_points_m(guide) -> dict[str, tuple[float, float, float]]:
     Points E-H that the guide defines in its ``[points]`` are used as they
     are. Otherwise (the :class:`~guidefit.model.guides.Guide` has no
     carriage width), ``w`` is the |x| of the lateral hammer point of
-    :data:`guidefit.simulate.DEFAULT_RUNS` (the hammer hits the side face
+    :data:`DEFAULT_RUNS` (the hammer hits the side face
     there), the depth is :data:`SIDE_DEPTH_M` below the top face and
     ``z1`` is the largest |z| of the guide's points A-D less
     :data:`SIDE_INSET_M`: E (+w, -s, +z1), F (+w, -s, -z1), G (-w, -s, +z1),
@@ -138,8 +159,6 @@ def side_points_m(guide) -> dict[str, tuple[float, float, float]]:
     >>> {k: tuple(round(v, 3) for v in p) for k, p in side_points_m(load_guide("MRB35")).items()}
     {'E': (0.05, -0.015, 0.04), 'F': (0.05, -0.015, -0.04), 'G': (-0.05, -0.015, 0.04), 'H': (-0.05, -0.015, -0.04)}
     """
-    from guidefit.simulate import DEFAULT_RUNS
-
     points = guide.measuring_points_m
     if all(p in points for p in SIDE_POINTS):
         return {p: tuple(float(v) for v in points[p]) for p in SIDE_POINTS}
@@ -161,7 +180,7 @@ def resolve_layout(guide, layout: str, runs) -> dict[str, tuple[SensorSpec, ...]
         A name of :data:`LAYOUTS` (``triax:`` followed by comma-separated
         guide points) or the path of a layout TOML file (:func:`read_layout_file`).
     runs : iterable of HammerRun
-        The runs (anything with ``name`` and ``direction``).
+        The runs (anything with ``name`` and ``direction``), e.g. :data:`DEFAULT_RUNS`.
 
     Returns
     -------
@@ -175,7 +194,6 @@ def resolve_layout(guide, layout: str, runs) -> dict[str, tuple[SensorSpec, ...]
 
     Examples
     --------
-    >>> from guidefit.simulate import DEFAULT_RUNS
     >>> out = resolve_layout("MRB35", "default", DEFAULT_RUNS)
     >>> {run: [s.name for s in sensors] for run, sensors in out.items()}
     {'vertical': ['acc_A_y', 'acc_B_y', 'acc_C_y', 'acc_D_y'], 'lateral': ['acc_A_x', 'acc_B_x', 'acc_C_x', 'acc_D_x']}
@@ -256,7 +274,6 @@ def read_layout_file(path, guide, runs) -> dict[str, tuple[SensorSpec, ...]]:
     Examples
     --------
     >>> import pathlib, tempfile
-    >>> from guidefit.simulate import DEFAULT_RUNS
     >>> text = '''
     ... [[sensor]]
     ... name = "acc_A_y"
@@ -388,7 +405,6 @@ def apply_hits(runs, hits) -> tuple:
 
     Examples
     --------
-    >>> from guidefit.simulate import DEFAULT_RUNS
     >>> [r.position_m for r in apply_hits(DEFAULT_RUNS, ["vertical:0,0,0"])]
     [(0.0, 0.0, 0.0), (0.05, -0.012, 0.006)]
     """

@@ -103,6 +103,7 @@ from pathlib import Path
 import numpy as np
 
 from guidefit.errors import ModelError
+from guidefit.layouts import DEFAULT_RUNS, HammerRun
 
 #: Modal damping ratio per mode label: the paper's identified values (Eq. 26, 28:
 #: c_V = 2750 N s/m and c_H = 3109 N s/m give 2.88 % and 10.5 %) for the vertical
@@ -113,24 +114,6 @@ SUPPORT_DAMPING = 0.02
 
 TRUTH_FORMAT = "guidefit-simulation-truth"
 PALMGREN_EXPONENT = 10.0 / 9.0
-
-
-@dataclass(frozen=True)
-class HammerRun:
-    """One excitation set-up: run name, hit point (m, carriage frame) and force direction."""
-
-    name: str
-    position_m: tuple[float, float, float]
-    direction: tuple[float, float, float]
-
-
-#: 'vertical': near the top centre, slightly off-centre so that pitch and roll are
-#: weakly excited too, force downwards; 'lateral': on the carriage side below the
-#: top face, force along -x.
-DEFAULT_RUNS = (
-    HammerRun("vertical", (0.004, 0.0, 0.008), (0.0, -1.0, 0.0)),
-    HammerRun("lateral", (0.05, -0.012, 0.006), (-1.0, 0.0, 0.0)),
-)
 
 
 @dataclass(frozen=True)
