@@ -670,13 +670,19 @@ def convert_cmd(source, out_path, compression):
 @click.option("--layout", type=click.Choice(["hits", "signals"]), default="hits", show_default=True,
               help="One pre-triggered record per hit, or one continuous record.")
 @click.option("--ideal", is_flag=True, help="No sensor noise, no quantisation, no clipping.")
+@click.option("--sensors", "sensor_layout", default="default", show_default=True, metavar="LAYOUT",
+              help="Accelerometers of each run: default (A-D, the hammer's axis in each run), both (x and y "
+                   "at A-D), pair (A, C; one axis per run), single (A; one axis per run), triax:A,C (x, y, z "
+                   "at the named points), side (lateral run: x at side-face points E-H), or a layout .toml file.")
+@click.option("--hit", "hit_points", multiple=True, metavar="RUN:x,y,z",
+              help="Move a run's hammer point, m in the carriage frame (repeatable), e.g. lateral:0.05,-0.012,0.")
 def simulate_cmd(guide_name, out_path, effects, faults, hits, seed, file_format, runs, record_s, force_n,
-                 layout, ideal):
+                 layout, ideal, sensor_layout, hit_points):
     """Simulate a hammer test with known truth, written in the recording contract."""
     from guidefit.simulate import config_from_options, write_simulation
 
     config = config_from_options(runs=runs, hits=hits, record_s=record_s, force_n=force_n, layout=layout,
-                                 faults=faults, ideal=ideal)
+                                 faults=faults, ideal=ideal, sensor_layout=sensor_layout, hit_points=hit_points)
     out = write_simulation(out_path, guide_name, effects, config, seed, file_format=file_format, progress=True)
     for path in out.recordings:
         click.echo(f"wrote {path}")

@@ -103,6 +103,7 @@ from pathlib import Path
 import numpy as np
 
 from guidefit.errors import ModelError
+from guidefit.layouts import DEFAULT_RUNS, HammerRun
 
 #: Modal damping ratio per mode label: the paper's identified values (Eq. 26, 28:
 #: c_V = 2750 N s/m and c_H = 3109 N s/m give 2.88 % and 10.5 %) for the vertical
@@ -113,24 +114,6 @@ SUPPORT_DAMPING = 0.02
 
 TRUTH_FORMAT = "guidefit-simulation-truth"
 PALMGREN_EXPONENT = 10.0 / 9.0
-
-
-@dataclass(frozen=True)
-class HammerRun:
-    """One excitation set-up: run name, hit point (m, carriage frame) and force direction."""
-
-    name: str
-    position_m: tuple[float, float, float]
-    direction: tuple[float, float, float]
-
-
-#: 'vertical': near the top centre, slightly off-centre so that pitch and roll are
-#: weakly excited too, force downwards; 'lateral': on the carriage side below the
-#: top face, force along -x.
-DEFAULT_RUNS = (
-    HammerRun("vertical", (0.004, 0.0, 0.008), (0.0, -1.0, 0.0)),
-    HammerRun("lateral", (0.05, -0.012, 0.006), (-1.0, 0.0, 0.0)),
-)
 
 
 @dataclass(frozen=True)
@@ -216,7 +199,12 @@ class SimulationConfig:
         Modal damping ratio per mode label, overriding :data:`DEFAULT_DAMPING`
         (key ``support`` for extra modes).
     sensors, axes : str
-        Measuring points (guide point names) and axes of the accelerometers.
+        Measuring points (guide point names) and axes of the accelerometers,
+        the same in every run (used when ``sensor_layout`` is None).
+    sensor_layout : str or None
+        Each run's accelerometers from a layout of :mod:`guidefit.layouts`
+        (``default``, ``both``, ``pair``, ``single``, ``side``,
+        ``triax:A,C`` or a layout TOML file); None: ``sensors`` x ``axes``.
     adc_bits : int or None
         ADC resolution; None: no quantisation and no clipping (ideal chain).
     force_range_n, acc_range_m_s2 : float
@@ -248,6 +236,7 @@ class SimulationConfig:
     damping: dict = field(default_factory=dict)
     sensors: str = "ABCD"
     axes: str = "xy"
+    sensor_layout: str | None = None
     adc_bits: int | None = 16
     force_range_n: float = 2048.0
     acc_range_m_s2: float = 1024.0
@@ -267,16 +256,21 @@ class SimulationConfig:
         out = asdict(self)
         out["runs"] = [asdict(r) for r in self.runs]
         out["faults"] = [{"name": f.name, "parameters": dict(f.parameters)} for f in _faults(self)]
+        if self.sensor_layout is not None:
+            out["sensor_layout"] = os.fspath(self.sensor_layout)  # a layout file given as a Path
         return out
 
 
 def config_from_options(runs=None, hits=None, record_s=None, force_n=None, layout=None, faults=(),
-                        ideal: bool = False, base: SimulationConfig | None = None) -> SimulationConfig:
+                        ideal: bool = False, base: SimulationConfig | None = None, sensor_layout=None,
+                        hit_points=()) -> SimulationConfig:
     """A :class:`SimulationConfig` from command-line style options (None keeps the default).
 
     ``runs`` names runs of :data:`DEFAULT_RUNS` (a list or ``"vertical,lateral"``);
     ``force_n`` is ``(min, max)`` or ``"min,max"`` in N; ``faults`` are
-    ``NAME[:param=value,...]`` texts.
+    ``NAME[:param=value,...]`` texts; ``sensor_layout`` a layout of
+    :mod:`guidefit.layouts`; ``hit_points`` ``RUN:x,y,z`` texts that move a
+    run's hammer point (:func:`guidefit.layouts.apply_hits`).
 
     >>> cfg = config_from_options(runs="vertical", hits=3, force_n="100,150")
     >>> [r.name for r in cfg.runs], cfg.hits, cfg.force_n
@@ -310,6 +304,12 @@ def config_from_options(runs=None, hits=None, record_s=None, force_n=None, layou
         changes["layout"] = layout
     if faults:
         changes["faults"] = tuple(parse_fault(f) if isinstance(f, str) else f for f in faults)
+    if sensor_layout is not None:
+        changes["sensor_layout"] = str(sensor_layout)
+    if hit_points:
+        from guidefit.layouts import apply_hits
+
+        changes["runs"] = apply_hits(changes.get("runs", cfg.runs), hit_points)
     cfg = replace(cfg, **changes)
     return cfg.ideal() if ideal else cfg
 
@@ -758,27 +758,41 @@ def _check_config(config: SimulationConfig, guide) -> None:
         p = np.asarray(r.position_m, float)
         if p.shape != (3,) or not np.all(np.isfinite(p)):
             bad(f"runs[{r.name}].position_m", r.position_m, "must be a finite 3-vector")
-    for p in config.sensors:
-        if p not in guide.measuring_points_m:
-            bad("sensors", config.sensors, f"point '{p}' not defined by guide {guide.name} "
-                f"(have {''.join(guide.measuring_points_m)})")
-    if not config.axes or any(a not in "xyz" for a in config.axes):
-        bad("axes", config.axes, "letters from 'xyz'")
+    if config.sensor_layout is not None:
+        if not isinstance(config.sensor_layout, str | os.PathLike):
+            bad("sensor_layout", config.sensor_layout, "must be a layout name or a layout file path")
+        _layout(config, guide)  # a bad layout raises ModelError naming the layout
+    else:
+        for p in config.sensors:
+            if p not in guide.measuring_points_m:
+                bad("sensors", config.sensors, f"point '{p}' not defined by guide {guide.name} "
+                    f"(have {''.join(guide.measuring_points_m)})")
+        if not config.axes or any(a not in "xyz" for a in config.axes):
+            bad("axes", config.axes, "letters from 'xyz'")
     if config.pulse_s * config.sample_rate_hz * config.oversample < 2:
         bad("pulse_s", config.pulse_s, "shorter than two internal samples; raise oversample")
+
+
+def _layout(config, guide) -> dict:
+    """Run name -> tuple of SensorSpec: the resolved ``sensor_layout``, or ``sensors`` x ``axes`` in every run."""
+    from guidefit.layouts import AXES, SensorSpec, resolve_layout
+
+    if config.sensor_layout is not None:
+        return resolve_layout(guide, config.sensor_layout, config.runs)
+    specs = tuple(SensorSpec(f"acc_{p}_{a}", tuple(guide.measuring_points_m[p]), AXES[a])
+                  for p in config.sensors for a in config.axes)
+    return {r.name: specs for r in config.runs}
 
 
 def _channels(config, guide, run: HammerRun):
     names, units, positions, directions = ["force"], ["N"], [tuple(run.position_m)], []
     d = np.asarray(run.direction, float)
     directions.append(d / np.linalg.norm(d))
-    axis_vec = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
-    for p in config.sensors:
-        for a in config.axes:
-            names.append(f"acc_{p}_{a}")
-            units.append("m/s^2")
-            positions.append(tuple(guide.measuring_points_m[p]))
-            directions.append(np.array(axis_vec[a]))
+    for spec in _layout(config, guide)[run.name]:
+        names.append(spec.name)
+        units.append("m/s^2")
+        positions.append(tuple(spec.position_m))
+        directions.append(np.array(spec.direction))
     return tuple(names), tuple(units), np.array(positions, float), np.array(directions, float)
 
 
@@ -995,7 +1009,28 @@ def _prepare(guide, effects, config):
         if f.parameters["run"] not in ("all", *(r.name for r in config.runs)):
             raise ModelError(f"fault {f.name}: run '{f.parameters['run']}' not simulated; "
                              f"have {', '.join(r.name for r in config.runs)}")
+    _check_loose_sensors(faults, _layout(config, guide))
     return guide, config, faults, build_model(guide, effects, config.damping)
+
+
+def _check_loose_sensors(faults, layout: dict) -> None:
+    """A loose sensor must be a channel of a run it applies to (``run=all``: of any run)."""
+    for f in faults:
+        if f.name != "loose_sensor":
+            continue
+        channel, run = f.parameters["channel"], f.parameters["run"]
+        targets = list(layout) if run == "all" else [run]
+        if not any(channel in (s.name for s in layout[t]) for t in targets):
+            have = sorted({s.name for t in targets for s in layout[t]})
+            where = "any run" if run == "all" else f"run '{run}'"
+            raise ModelError(f"fault loose_sensor: channel '{channel}' not recorded in {where}; "
+                             f"have {', '.join(have)}")
+
+
+def _run_faults(faults, names) -> tuple:
+    """The faults of one run: a loose sensor only where its channel is recorded (a layout may
+    record it in one run only; :func:`_check_loose_sensors` made sure some run does)."""
+    return tuple(f for f in faults if f.name != "loose_sensor" or f.parameters["channel"] in names)
 
 
 class _progress:
@@ -1033,6 +1068,7 @@ def _iter_run(model: _Model, config, run: HammerRun, seed: int, faults, hits_tru
     fs = config.sample_rate_hz
     n_rec, n_pre, n_gap = round(config.record_s * fs), round(config.pretrigger_s * fs), round(config.gap_s * fs)
     channels = _channels(config, model.guide, run)
+    faults = _run_faults(faults, channels[0])
     start = 0
     for i in range(config.hits):
         hit_faults = _hit_faults(faults, run.name, i, config.hits)
@@ -1131,7 +1167,7 @@ def _truth(model: _Model, config, seed, runs_truth, faults) -> dict:
         "nominal_modes": nominal,
         "parameters": params,
         "mass_kg": mass,
-        "runs": runs_truth,
+        "runs": _runs_truth_sensors(runs_truth, config, model.guide),
         "config": config.to_dict(),
         "notes": notes,
     }
@@ -1139,6 +1175,14 @@ def _truth(model: _Model, config, seed, runs_truth, faults) -> dict:
         truth["static_equilibrium_q"] = [float(x) for x in model.contacts.q0]
         truth["preload_m"] = model.contacts.preload_m
     return _jsonable(truth)
+
+
+def _runs_truth_sensors(runs_truth: dict, config, guide) -> dict:
+    """With a ``sensor_layout``, each run's truth lists its resolved sensors (name, position, direction)."""
+    if config.sensor_layout is None:
+        return runs_truth
+    layout = _layout(config, guide)
+    return {name: {**t, "sensors": [s.to_dict() for s in layout[name]]} for name, t in runs_truth.items()}
 
 
 def _jsonable(obj):
