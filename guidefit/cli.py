@@ -224,7 +224,12 @@ def plan_cmd(setup, guide_name, layout, hit_texts, no_search, as_json, plot_path
     _refuse([plot_path], [setup, _guide_file(guide_name)])
     if plot_path and not plot_path.lower().endswith(".png"):
         raise click.BadParameter(f"'{plot_path}': the plot is a PNG file (.png)", param_hint="--plot")
-    hits = dict(layouts.parse_hit(t) for t in hit_texts)
+    hits = {}
+    for text in hit_texts:
+        name, position = layouts.parse_hit(text)
+        if name in hits:
+            raise click.BadParameter(f"run '{name}' given twice", param_hint="--hit")
+        hits[name] = position
     result = plan(setup, guide=guide_name, layout=layout, hits=hits, search=not no_search)
     report.render_plan(result, as_json=as_json, plot_path=plot_path)
 

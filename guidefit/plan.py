@@ -122,11 +122,10 @@ def layout_runs(guide, layout: str = "default", hits: dict | None = None, run_na
     """PlanRuns of a ``--sensors`` layout (:func:`guidefit.layouts.resolve_layout`) on the simulator's
     default runs, hit points moved by ``hits`` (run -> (x, y, z))."""
     from guidefit import layouts
-    from guidefit.simulate import DEFAULT_RUNS
 
-    runs = [r for r in DEFAULT_RUNS if run_names is None or r.name in run_names]
+    runs = [r for r in layouts.DEFAULT_RUNS if run_names is None or r.name in run_names]
     if hits:
-        runs = list(layouts.apply_hits(tuple(runs), hits))
+        runs = list(layouts.apply_hits(tuple(runs), list(hits.items())))
     sensors = layouts.resolve_layout(guide, layout, tuple(runs))
     return [PlanRun(r.name, tuple(lab_mod.Sensor(s.name, tuple(s.position_m), tuple(s.direction))
                                   for s in sensors[r.name]),
