@@ -58,15 +58,17 @@ from dataclasses import dataclass, field
 import numpy as np
 
 #: prior std of ln(f_measured / f_model): a soft rig or a large added mass moves a mode by tens of percent
-FREQUENCY_LOG_STD = 0.3
+FREQUENCY_LOG_STD = 0.4
 #: scale of 1 - MAC in the shape cost: a carriage mode distorted by a rig effect keeps 1 - MAC below ~0.1
 SHAPE_RHO_SCALE = 0.05
 #: prior std of ln(a / common scale) of the driving-point residue
 AMPLITUDE_LOG_STD = math.log(2.0)
 #: cost of a negative scale (measured mode in antiphase with the model mode at the hit point)
 SIGN_COST = 3.0
-#: cost of leaving a measured mode unlabelled (``extra``)
+#: cost of leaving a measured mode unlabelled (``extra``) ...
 EXTRA_COST = 8.0
+#: ... plus this much per unit of its carriage share (:func:`extra_costs`)
+EXTRA_SHARE_COST = 8.0
 #: a label is decided when every assignment without it costs this much more (likelihood ratio e^2)
 DECIDE_MARGIN = 2.0
 #: a model mode whose predicted readings are below this fraction of the largest is not offered
@@ -318,6 +320,26 @@ def evidence(measured: list[Measured], runs: dict, model, predicted: list[dict] 
     return Evidence(rho, raw / common, shape_cost, freq_cost, visible_modes(predicted), common)
 
 
+def extra_costs(ev: Evidence) -> np.ndarray:
+    """The cost of calling each measured mode ``extra`` (another body's mode, not one of the carriage).
+
+    :data:`EXTRA_COST`, plus :data:`EXTRA_SHARE_COST` per unit of the carriage
+    share ``s^2`` of its best-fitting carriage motion: another body's mode moves
+    the carriage little, so of two modes with the carriage's vertical motion (a
+    heavy base splits the vertical mode in two) the one carrying more of it is
+    the carriage mode (the contract's "v-dominated" mode).
+    """
+    n = ev.rho.shape[0]
+    out = np.full(n, EXTRA_COST)
+    if ev.rho.shape[1] == 0:
+        return out
+    for k in range(n):
+        fits = ev.visible & (ev.rho[k] < 0.2) & np.isfinite(ev.scale[k])
+        if np.any(fits):  # the most carriage-like reading (a layout may not tell a group's modes apart)
+            out[k] += EXTRA_SHARE_COST * float(np.clip(np.max(ev.scale[k][fits]), 0.0, 1.0))
+    return out
+
+
 # --------------------------------------------------------------------------- the assignment
 
 
@@ -457,7 +479,7 @@ def label_modes(measured: list[Measured], runs: dict, model, predicted: list[dic
         return [Label("extra", None, None, None, None, math.inf,
                       note="no model mode is both excited and observed by these runs") for _ in measured]
     comb, shp, frq = (x[:, offered] for x in (ev.combined, ev.shape, ev.frequency))
-    extra = np.full(n, EXTRA_COST)
+    extra = extra_costs(ev)
     _, assign = best_assignment(comb, extra)
     out = []
     for k in range(n):
