@@ -72,7 +72,7 @@ EXTRA_SHARE_COST = 8.0
 #: a label is decided when every assignment without it costs this much more (likelihood ratio e^2)
 DECIDE_MARGIN = 2.0
 #: a model mode whose predicted readings are below this fraction of the largest is not offered
-VISIBLE_FRACTION = 0.05
+VISIBLE_FRACTION = 1e-3
 #: the common scale is taken from measured modes whose best MAC is at least this
 SCALE_MAC = 0.8
 #: ... and used only when it is off by more than this factor (a unit error, not physics or calibration)
@@ -250,7 +250,7 @@ class Evidence:
     shape: np.ndarray  # shape cost (rho, mixing angle, scale, sign), profiled over the group's mixing angle
     frequency: np.ndarray  # frequency cost
     visible: np.ndarray  # bool per model mode
-    common_scale: float
+    common_scale: float  # the recording's scale against the model's mass-normalised modes (1: as predicted)
 
     @property
     def combined(self) -> np.ndarray:
@@ -454,7 +454,8 @@ class Label:
         return self.shape_margin >= DECIDE_MARGIN
 
 
-def label_modes(measured: list[Measured], runs: dict, model, predicted: list[dict] | None = None) -> list[Label]:
+def label_modes(measured: list[Measured], runs: dict, model, predicted: list[dict] | None = None,
+                ev: Evidence | None = None) -> list[Label]:
     """Label every measured mode at once (see the module docstring).
 
     Parameters
@@ -469,7 +470,7 @@ def label_modes(measured: list[Measured], runs: dict, model, predicted: list[dic
     -------
     list of Label, one per measured mode.
     """
-    ev = evidence(measured, runs, model, predicted)
+    ev = ev if ev is not None else evidence(measured, runs, model, predicted)
     labels = list(model.labels)
     n = len(measured)
     offered = np.flatnonzero(ev.visible)

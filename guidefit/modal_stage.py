@@ -587,7 +587,12 @@ def _labelled(gf, candidates, per_run, frf_by_run, geometry, model, warnings, ba
                                 geometry[r].excitation_position_m) for r in gf.runs}
     measured = [lab_mod.Measured(float(c["frequency_hz"]), c["constants"]) for c in candidates]
     predicted = lab_mod.predicted_constants(model, views)
-    decided = lab_mod.label_modes(measured, views, model, predicted)
+    ev = lab_mod.evidence(measured, views, model, predicted)
+    decided = lab_mod.label_modes(measured, views, model, predicted, ev)
+    if ev.common_scale != 1.0:
+        warnings.append(f"the modal constants are {abs(ev.common_scale):.3g} times those the model predicts for a "
+                        f"carriage of {guide_mass(model):.3g} kg at these sensors: a force or acceleration unit or "
+                        "sensitivity is off by about that factor (labels were made at the recording's own scale)")
     visible = dict(zip(model.labels, lab_mod.visible_modes(predicted)))
     modes, extras = [], []
     for c, dec in zip(candidates, decided):
@@ -629,6 +634,9 @@ def _labelled(gf, candidates, per_run, frf_by_run, geometry, model, warnings, ba
                             f"predict it ({dec.note})")
             extras.append(entry)
         else:
+            if dec.basis == "frequency" and label in ("vertical", "roll_low"):
+                warnings.append(f"mode {label} at {m.frequency_hz:.1f} Hz: its label rests on its frequency alone "
+                                f"({dec.note}); guidefit plan shows which layout decides it by shape")
             modes.append(entry)
     found = {m.label for m in modes}
     missing = [lab for lab in model.labels if lab not in found and not lab.startswith("support")]
@@ -645,6 +653,13 @@ def _labelled(gf, candidates, per_run, frf_by_run, geometry, model, warnings, ba
     missing = [lab for lab in missing if lab not in told]
     return ModalResult(sorted(modes, key=lambda m: m.frequency_hz), sorted(extras, key=lambda m: m.frequency_hz),
                        missing, gf, per_run, band)
+
+
+def guide_mass(model) -> float:
+    """The carriage mass (kg) behind a model's mass-normalised shapes (from its vertical mode)."""
+    i = int(np.argmax(np.asarray(model.energy_fractions)[:, 0]))
+    v = float(np.asarray(model.shapes)[1, i])
+    return 1.0 / (v * v) if v else float("nan")
 
 
 def _candidate_labels(extras) -> dict:
