@@ -232,7 +232,7 @@ def test_modal_stage_starts_from_frf_sets(recorded):
     assert [m.label for m in res.modes] == [m["label"] for m in truth["modes"]]
     assert len(res.fit.diagram.orders) > 0 and res.fit.selection.chosen
     for m in res.modes:
-        assert set(m.std_parts) == {"fit", "jackknife", "selection"}
+        assert set(m.std_parts) == {"fit", "jackknife", "selection", "estimator"}
 
 
 def test_exponential_window_is_modelled_exactly_on_a_simulated_recording(recorded):
