@@ -81,6 +81,8 @@ def cell(effect: str, layout: str, seed: int, hits: int, record_s: float, folder
     out["worst_std"] = worst
     if result.gate:
         out["problems"].append(f"gate: {result.gate[:80]}")
+    if result.sensor_faults:
+        out["problems"].append("false sensor fault: " + ", ".join(f.channel for f in result.sensor_faults))
     if do_explain:
         from guidefit.explain import explain
 

@@ -85,11 +85,11 @@ import numpy as np
 from guidefit.frf import top_of
 
 #: Relative RMS rigid-fit residual of all shapes below which no sensor fault is looked for.
-FAULT_MIN_RELRES = 0.05
+FAULT_MIN_RELRES = 0.01
 #: The best correction must cut the residual sum of squares at least this many times.
 FAULT_MIN_IMPROVEMENT = 16.0
 #: A scale within this factor of 1 (either way) is calibration tolerance, not a fault.
-SCALE_TOLERANCE = 1.2
+SCALE_TOLERANCE = 1.1
 #: At most this many faulty channels are named and corrected (one after the other).
 MAX_FAULTS = 2
 #: Corrections within this factor of the best one (residual sum of squares) explain the data equally.

@@ -554,7 +554,7 @@ def _measure_mode(bins, mode, notes: list) -> list:
 
 def simulate_force_levels(guide="MRB35", effects=(), forces_n=(100.0, 1000.0, 5000.0), hits: int = 4,
                           record_s: float = 0.05, spread: float = 0.05, seed: int = 0, ideal: bool = False,
-                          run_name: str = "vertical", oversample: int = 4):
+                          run_name: str = "vertical", oversample: int = 4, sensor_layout: str | None = None):
     """A recording of one hammer set-up hit at several force levels, one run per level.
 
     Each level is a :func:`guidefit.simulate.simulate` run (``run_name`` of
@@ -579,7 +579,8 @@ def simulate_force_levels(guide="MRB35", effects=(), forces_n=(100.0, 1000.0, 50
         name = f"{run_name}_{force:g}N"
         cfg = SimulationConfig(runs=(replace(base[run_name], name=name),), hits=hits, record_s=record_s,
                                force_n=(force * (1 - spread), force * (1 + spread)),
-                               force_range_n=full, acc_range_m_s2=full / 2, oversample=oversample)
+                               force_range_n=full, acc_range_m_s2=full / 2, oversample=oversample,
+                               sensor_layout=sensor_layout)
         data, truth = simulate(guide, effects, cfg.ideal() if ideal else cfg, seed=seed + 1000 * level)
         runs += list(data.runs)
         truths[name] = truth

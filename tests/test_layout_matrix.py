@@ -73,7 +73,7 @@ def _truth_parameters(truth) -> dict:
 def test_labels_parameters_and_std_on_every_layout(cases, effect, layout):
     result, truth = cases(effect, layout)
     t = {m["label"]: m["frequency_hz"] for m in truth["modes"]}
-    assert result.gate is None
+    assert result.gate is None and result.sensor_faults == ()
     for m in result.modes:  # every label given is the truth's mode of that label
         assert m.frequency_hz == pytest.approx(t[m.label], rel=2e-3), m.label
         assert m.label_basis in ("shape", "frequency", "shape+frequency") and m.label_note
