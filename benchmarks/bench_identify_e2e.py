@@ -24,7 +24,15 @@ included, timed from outside): a minimal floor script (``python -c``:
 imports h5py and scipy.fft, reads every hit, one rfft each) against the
 command ``guidefit identify FILE`` (its imports, the work, the rich table).
 
-Run: ``python benchmarks/bench_identify_e2e.py [--quick] [--repeat N]``.
+The default file is the paper's own test as most labs record it (issue 20):
+two runs of 50 hits each, 0.5 s at 200 kHz, force + four accelerometers
+along one axis per run (y at A-D hit vertically, x at A-D hit laterally),
+simulated by ``guidefit simulate --sensors default`` (all five carriage
+modes in it, float32, uncompressed). ``--file single-run`` keeps issue 13's
+file (one vertical run of 100 hits tiled from simulated ones). The floor
+reads every run's hits.
+
+Run: ``python benchmarks/bench_identify_e2e.py [--quick] [--repeat N] [--file one-axis|single-run]``.
 """
 
 from __future__ import annotations
@@ -55,7 +63,36 @@ def w_identify(path):
     return {"seconds": dt, "f_V_hz": f_v, "n_modes": len(result.modes), "gate": result.gate}
 
 
-WORKERS = {"floor32": F.w_floor32, "frf": F.w_guidefit, "identify": w_identify}
+def w_floor_all(path):
+    """bench_frf.py's float32 floor over every run of the file: h5py ``ds[i]`` per hit + ``scipy.fft.rfft``."""
+    import h5py
+    import scipy.fft
+
+    t = time.perf_counter()
+    acc, n = 0.0, 0
+    with h5py.File(path, "r") as f:
+        for run in f["runs"].values():
+            ds = run["hits"]
+            n += int(ds.size)
+            for i in range(ds.shape[0]):
+                acc += float(abs(scipy.fft.rfft(ds[i], axis=0, workers=2)[1, 0]))
+    return {"seconds": time.perf_counter() - t, "n_samples": n, "check": acc}
+
+
+def w_frf_all(path):
+    """``compute_frf(run, iter_hits(run))`` of every run, timed."""
+    from guidefit.frf import compute_frf
+    from guidefit.hits import iter_hits
+    from guidefit.recording import read_recording
+
+    t = time.perf_counter()
+    n = 0
+    for run in read_recording(path).runs:
+        n += compute_frf(run, iter_hits(run)).n_averages
+    return {"seconds": time.perf_counter() - t, "n_averages": n}
+
+
+WORKERS = {"floor32": w_floor_all, "frf": w_frf_all, "identify": w_identify}
 LABELS = {"floor32": "floor (float32): read + one rfft pass", "frf": "guidefit FRF only (compute_frf)",
           "identify": "guidefit identify, end to end"}
 
@@ -66,12 +103,23 @@ import sys
 import h5py
 import scipy.fft
 with h5py.File(sys.argv[1], "r") as f:
-    ds = f["runs"]["vertical"]["hits"]
     acc = 0.0
-    for i in range(ds.shape[0]):
-        acc += float(abs(scipy.fft.rfft(ds[i], axis=0, workers=2)[1, 0]))
+    for run in f["runs"].values():
+        ds = run["hits"]
+        for i in range(ds.shape[0]):
+            acc += float(abs(scipy.fft.rfft(ds[i], axis=0, workers=2)[1, 0]))
 print(acc)
 """
+
+
+def one_axis_file(path: Path, hits_per_run: int, bar=None) -> None:
+    """The paper's two runs, one axis per run (guidefit.simulate, --sensors default), float32, uncompressed."""
+    from guidefit.recording import write_recording
+    from guidefit.simulate import SimulationConfig, simulate
+
+    cfg = SimulationConfig(hits=hits_per_run, record_s=F.RECORD_S, sensor_layout="default")
+    data, _ = simulate("MRB35", config=cfg, seed=20)
+    write_recording(path, data)
 
 
 def process_cmd(name: str, path: Path) -> list[str]:
@@ -104,6 +152,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="20 hits")
     ap.add_argument("--repeat", type=int, default=None, help="rounds (median shown; default 3, 1 with --quick)")
+    ap.add_argument("--file", choices=("one-axis", "single-run"), default="one-axis",
+                    help="one-axis: two runs of 50 hits, one axis per run (default); single-run: issue 13's file")
     ap.add_argument("--worker", nargs=2, metavar=("VARIANT", "FILE"), help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.worker:
@@ -121,9 +171,11 @@ def main() -> None:
     repeat = args.repeat or (1 if args.quick else 3)
     C.print_machine()
     C.BENCH_DIR.mkdir(parents=True, exist_ok=True)
-    path = C.BENCH_DIR / f"e2e_{n_hits}hits.h5"
+    path = C.BENCH_DIR / f"e2e_{n_hits}hits_{args.file}.h5"
     with C.progress() as bar:
-        if not path.exists():
+        if not path.exists() and args.file == "one-axis":
+            one_axis_file(path, n_hits // 2, bar)
+        elif not path.exists():
             records, header, _ = C.simulated_hits(n_sim, F.RECORD_S)
             C.write_hits_file(path, records, header, n_hits, bar)
         with open(path, "rb") as fh:  # into the page cache
@@ -148,7 +200,8 @@ def main() -> None:
         s = m["child"]["seconds"]
         rows.append([LABELS[name], f"{s:.2f}", ", ".join(f"{x['child']['seconds']:.2f}" for x in runs[name]),
                      f"{m['child']['cpu_s']:.2f}", f"{s / floor:.2f}", f"{m['rss_mb']:.0f}"])
-    print(f"{n_hits} hits x {F.RECORD_S} s x 5 channels at {F.FS / 1e3:.0f} kHz, float32, page cache warm; "
+    kind = "two runs, one axis per run" if args.file == "one-axis" else "one vertical run"
+    print(f"{n_hits} hits ({kind}) x {F.RECORD_S} s x 5 channels at {F.FS / 1e3:.0f} kHz, float32, page cache warm; "
           f"median of {repeat} round(s), variants interleaved\n")
     print(C.md_table(["variant", "s", "runs (s)", "CPU s", "x floor", "peak RSS MB"], rows))
     ident = res["identify"]["child"]

@@ -641,18 +641,16 @@ def mass_warnings(modes, sets: list[ShapeSet], mass_matrix: np.ndarray, mass_kg:
 
 def driving_row(direction, position_m) -> np.ndarray:
     """The hammer's row b (5,): its direction times the rigid-body map at the hit point (origin if unknown)."""
-    from guidefit.model.vibration import rigid_body_map
+    from guidefit.labels import driving_row as row
 
-    pos = np.zeros(3) if position_m is None else np.asarray(position_m, float)
-    return np.asarray(direction, float) @ rigid_body_map(pos)
+    return row(direction, np.zeros(3) if position_m is None else position_m)
 
 
 def sensor_rows(channels) -> np.ndarray:
-    """(n_channels, 5): each sensor's reading per unit carriage motion; the same matrix as
-    :func:`guidefit.identify.sensor_matrix` (identify imports this module, so it is not imported here)."""
-    from guidefit.model.vibration import rigid_body_map
+    """(n_channels, 5): :func:`guidefit.labels.sensor_matrix`, the one sensor matrix of guidefit."""
+    from guidefit.labels import sensor_matrix
 
-    return np.array([np.asarray(ch.direction, float) @ rigid_body_map(ch.position_m) for ch in channels])
+    return sensor_matrix(channels)
 
 
 def shape_sets(runs, modes, hit_points: dict, band_hz=(None, None)) -> list[ShapeSet]:

@@ -47,7 +47,6 @@ from guidefit.modeshapes import (  # also re-exported: guidefit.identify.Identif
     _coherence_at,
     _half_power_entry,
     energy_shares,
-    label_modes,
     real_shape,
     rigid_body_motion,
     sensor_matrix,
@@ -467,11 +466,18 @@ def _fit_run(run, frf, guide, model, settings, warnings: list) -> list[Identifie
             "f_std": f_std, "z_std": z_std,
         })
     candidates = _significant(candidates)
-    labels = label_modes(candidates, model)
+    from guidefit import labels as lab_mod
+
+    view = {run.name: lab_mod.RunView(frf_channels(run, frf), tuple(run.excitation_direction),
+                                      None if run.excitation_position_m is None
+                                      else tuple(run.excitation_position_m))}
+    decided = lab_mod.label_modes([lab_mod.Measured(float(c["frequency_hz"]), {run.name: c["shape"]})
+                                   for c in candidates], view, model)
     out = []
     names = [ch.name for ch in frf_channels(run, frf)]
-    for c, label in zip(candidates, labels):
+    for c, dec in zip(candidates, decided):
         mode = c["mode"]
+        label = "extra" if dec.label == "ambiguous" else dec.label  # one run alone: not told apart is extra
         model_f = model.frequency_hz(label) if label in model.labels else None
         out.append(IdentifiedMode(
             label=label, run=run.name, frequency_hz=float(c["frequency_hz"]),
@@ -481,7 +487,7 @@ def _fit_run(run, frf, guide, model, settings, warnings: list) -> list[Identifie
             motion=tuple(float(v) for v in c["q"]), energy={k: float(v) for k, v in c["energy"].items()},
             coherence=_coherence_at(frf, mode.peak_frequency_hz, mode.residues),
             half_power=_half_power_entry(frf, mode, tau), raw_damping_ratio=float(mode.damping_ratio),
-            fit=mode,
+            fit=mode, label_basis=dec.basis, label_note=dec.note, label_mac=dec.mac, label_scale=dec.scale,
         ))
     return out
 

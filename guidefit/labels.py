@@ -217,7 +217,10 @@ def _readings(runs: dict, names, phi: np.ndarray) -> tuple[np.ndarray, np.ndarra
             part = g @ phi
             owner += [-1] * S.shape[0]
         cols.append(reading * part[:, None])
-    return np.hstack(cols) if cols else np.zeros((phi.shape[1], 0)), np.array(owner, int)
+    R = np.hstack(cols) if cols else np.zeros((phi.shape[1], 0))
+    top = float(np.abs(R).max()) if R.size else 0.0
+    R[np.abs(R) <= 1e-9 * top] = 0.0  # rounding, not a reading (a free run scale would make it any shape)
+    return R, np.array(owner, int)
 
 
 def _profile(m: np.ndarray, R: np.ndarray, owner: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -514,6 +517,24 @@ def label_modes(measured: list[Measured], runs: dict, model, predicted: list[dic
                              alt_s, alt_f, d_shape, d_freq, k, offered, labels)
         out.append(Label(labels[i], basis, labels[i], mac, _fin(ev.scale[k, i]), float(d_comb), (), note, costs,
                          float(d_shape), float(d_freq)))
+    return _contenders(out, measured)
+
+
+def _contenders(out: list, measured: list) -> list:
+    """A mode left extra that another mode's ambiguity names ("vertical at 5097 Hz") is ambiguous too."""
+    for k, lab in enumerate(out):
+        if lab.label != "ambiguous" or len(lab.candidates) < 2:
+            continue
+        other = str(lab.candidates[1][0])
+        if " at " not in other:
+            continue
+        f_other = float(other.split(" at ")[1].split()[0])
+        j = min(range(len(measured)), key=lambda i: abs(measured[i].frequency_hz - f_other))
+        if j != k and out[j].label == "extra":
+            cands = ((lab.candidates[1][0], lab.candidates[1][1]), (lab.candidates[0][0], lab.candidates[0][1]))
+            out[j] = Label("ambiguous", None, lab.model_label, out[j].mac, out[j].scale, lab.margin, cands,
+                           f"neither shape nor frequency tells {cands[0][0]} from {cands[1][0]} on these sensors",
+                           {}, out[j].shape_margin, out[j].frequency_margin)
     return out
 
 

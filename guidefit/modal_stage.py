@@ -27,12 +27,12 @@ the labelled modes of one modal model with shared poles
    (:func:`observable_basis`); when they see only mixtures of two motions,
    :func:`_resolve_groups` tests each motion's pure form against the
    hit-point residues.
-4. **Labels** from the kinetic-energy shares of the assembled motion
-   (:func:`guidefit.identify.label_modes`). A mode whose label the data
-   cannot decide -- two energy groups nearly equal, or the deciding DOF not
-   observed by any sensor of the runs that excite it -- is reported as
-   ``ambiguous`` with both candidates and their energy shares, and is not
-   used for the joint parameters.
+4. **Labels** from the model seen through each run's own sensors and hit
+   (:func:`guidefit.labels.label_modes`: shape and frequency evidence, one
+   optimal assignment, ``label_basis`` per mode). The assembled motion of
+   step 3 is a product (report, mode shapes, sensor check), not the labeller.
+   A mode whose label the evidence does not decide is ``ambiguous`` with its
+   candidates and is not used for the joint parameters.
 
 Examples
 --------
@@ -336,80 +336,6 @@ def _driven_motion(q0, constants, sensors, drive, runs):
 
         x = scipy.optimize.least_squares(resid, start, method="trf", xtol=1e-12, ftol=1e-12).x
     return x if np.sum(resid(x) ** 2) <= np.sum(resid(start) ** 2) else start
-
-
-def _ambiguity(energy: dict, observed: np.ndarray, label: str, model_labels) -> tuple[list, str] | None:
-    """(candidates [(label, share), ...], reason) when the label is not decided by the data, else None."""
-    groups = sorted(energy.items(), key=lambda kv: -kv[1])
-    (g1, e1), (g2, e2) = groups[0], groups[1]
-    name = {"v": "vertical", "theta": "pitch", "psi": "yaw", "u_phi": "roll"}
-    if e2 >= AMBIGUOUS_RATIO * e1:
-        return [(name[g1], float(e1)), (name[g2], float(e2))], "two motions carry nearly equal kinetic energy"
-    if g1 == "u_phi" and not (observed[0] and observed[4]):
-        other = "roll_high" if label == "roll_low" else "roll_low"
-        missing = "lateral translation u" if not observed[0] else "roll phi"
-        return ([(label, float(e1)), (other, float(e1))],
-                f"{missing} is not observed by the sensors of the runs that excite it (u-phi energy share given)")
-    unobserved = [dof for dof, seen in zip(("u", "v", "theta", "psi", "phi"), observed) if not seen]
-    if unobserved and e1 < 0.9:
-        alt = {"u": "roll_low", "v": "vertical", "theta": "pitch", "psi": "yaw", "phi": "roll_high"}[unobserved[0]]
-        return ([(label, float(e1)), (alt, float("nan"))],
-                f"{unobserved[0]} is not observed and the observed motion is mixed")
-    return None
-
-
-#: a second mode of the same motion with this share of the first's carriage energy: which one is the
-#: carriage mode is ambiguous
-SAME_GROUP_RATIO = 0.8
-
-
-def label_by_carriage_energy(candidates: list[dict], model) -> tuple[list[str], dict]:
-    """Labels from the assembled motion when it is mass-normalised (every run's hit point known).
-
-    Each mode's dominant energy group (v, theta, psi, u-phi) says which
-    carriage motion it is; among several modes of one group the carriage mode
-    is the one whose kinetic energy lies most in the carriage
-    (``carriage_energy`` = q^T M q of the mass-normalised motion; a base or
-    rail mode moves the carriage with little of its energy). u-phi modes: the
-    two with most carriage energy are the roll pair, the lower one roll_low
-    (one alone: roll_low when lateral translation dominates it). Returns the labels and, for modes whose label the data do not
-    decide (a second mode of the same group within :data:`SAME_GROUP_RATIO`),
-    ``{index: [(label, share), ...]}``. The model's frequencies are not used.
-    """
-    labels = ["extra"] * len(candidates)
-    ambiguous: dict[int, list] = {}
-    groups: dict[str, list[int]] = {}
-    for i, c in enumerate(candidates):
-        groups.setdefault(max(c["energy"], key=c["energy"].get), []).append(i)
-
-    def share(i):
-        return candidates[i]["carriage_energy"]
-
-    def name(i):
-        return f"at {candidates[i]['frequency_hz']:.0f} Hz"
-
-    for g, label in (("v", "vertical"), ("theta", "pitch"), ("psi", "yaw")):
-        members = sorted(groups.get(g, []), key=lambda i: -share(i))
-        if not members or label not in model.labels:
-            continue
-        labels[members[0]] = label
-        if len(members) > 1 and share(members[1]) >= SAME_GROUP_RATIO * share(members[0]):
-            pair = [(f"{label} {name(i)}", float(share(i))) for i in members[:2]]
-            ambiguous[members[0]] = ambiguous[members[1]] = pair
-    # u-phi: the two modes with most carriage energy are the roll pair (lower: roll_low); one alone is
-    # roll_low when lateral translation dominates it, else roll_high
-    members = sorted(groups.get("u_phi", []), key=lambda i: -share(i))
-    if len(members) == 1:
-        c = candidates[members[0]]
-        labels[members[0]] = "roll_low" if c["u_energy"] >= c["phi_energy"] else "roll_high"
-    elif members:
-        pair = sorted(members[:2], key=lambda i: candidates[i]["frequency_hz"])
-        labels[pair[0]], labels[pair[1]] = "roll_low", "roll_high"
-        if len(members) > 2 and share(members[2]) >= SAME_GROUP_RATIO * share(members[1]):
-            text = [(f"roll {name(i)}", float(share(i))) for i in members[1:3]]
-            ambiguous[members[1]] = ambiguous[members[2]] = text
-    labels = [lab if lab in model.labels or lab == "extra" else "extra" for lab in labels]
-    return labels, ambiguous
 
 
 def identify_frfs(frf_by_run: dict, geometry: dict, guide, settings=None, warnings: list | None = None,

@@ -1,10 +1,10 @@
-r"""Mode shapes at the sensors: rigid-body motion of the carriage, kinetic-energy shares, labels.
+r"""Mode shapes at the sensors: rigid-body motion of the carriage, kinetic-energy shares, IdentifiedMode.
 
 Shared by :mod:`guidefit.identify` (which re-exports every name) and
 :mod:`guidefit.modal_stage`: each sensor's reading per unit carriage motion
 (u, v, theta, psi, phi), the least-squares motion behind a shape, the
-energy shares that name a mode, and :class:`IdentifiedMode`, the labelled
-mode of an identification.
+kinetic-energy shares of a motion, and :class:`IdentifiedMode`, the labelled
+mode of an identification (the labels come from :mod:`guidefit.labels`).
 
 Examples
 --------
@@ -84,10 +84,11 @@ class IdentifiedMode:
 
 
 def sensor_matrix(channels) -> np.ndarray:
-    """(n_channels, 5): each sensor's reading per unit carriage motion (u, v, theta, psi, phi)."""
-    from guidefit.model.vibration import rigid_body_map
+    """(n_channels, 5): each sensor's reading per unit carriage motion; :func:`guidefit.labels.sensor_matrix`
+    (the one sensor matrix of guidefit), under its old name."""
+    from guidefit.labels import sensor_matrix as one
 
-    return np.array([np.asarray(ch.direction, float) @ rigid_body_map(ch.position_m) for ch in channels])
+    return one(channels)
 
 
 def real_shape(values) -> np.ndarray:
@@ -119,45 +120,6 @@ def energy_shares(q: np.ndarray, mass_matrix: np.ndarray) -> dict:
     total = contrib.sum() or 1.0
     return {"v": contrib[1] / total, "theta": contrib[2] / total, "psi": contrib[3] / total,
             "u_phi": (contrib[0] + contrib[4]) / total}
-
-
-_GROUP_LABEL = {"v": "vertical", "theta": "pitch", "psi": "yaw"}
-
-
-def label_modes(candidates: list[dict], model) -> list[str]:
-    """Labels for one run's modes from their energy shares (dicts with 'energy', 'frequency_hz', 'q').
-
-    Each of vertical/pitch/yaw goes to the mode of that motion nearest to the
-    model's frequency; the u-phi modes become roll_low (the lowest one whose
-    lateral translation dominates, i.e. lateral sensors in phase) and
-    roll_high (the highest phi-dominated one); the rest are ``extra``.
-    """
-    labels = ["extra"] * len(candidates)
-    groups: dict[str, list[int]] = {}
-    for i, c in enumerate(candidates):
-        g = max(c["energy"], key=c["energy"].get)
-        groups.setdefault(g, []).append(i)
-    for g, label in _GROUP_LABEL.items():
-        members = groups.get(g, [])
-        if members:
-            f_model = model.frequency_hz(label)
-            best = min(members, key=lambda i: abs(math.log(candidates[i]["frequency_hz"] / f_model)))
-            labels[best] = label
-    uphi = sorted(groups.get("u_phi", []), key=lambda i: candidates[i]["frequency_hz"])
-    if uphi:
-        m_u = [abs(candidates[i]["u_energy"]) >= abs(candidates[i]["phi_energy"]) for i in uphi]
-        if not any(m_u) and len(uphi) == 1:
-            # a lone roll-dominated mode is roll_high (a vertical run that misses the damped roll_low)
-            labels[uphi[0]] = "roll_high"
-            return labels
-        low = next((i for i, u in zip(uphi, m_u) if u), uphi[0])
-        labels[low] = "roll_low"
-        rest = [i for i in uphi if i != low and candidates[i]["frequency_hz"] > candidates[low]["frequency_hz"]]
-        if rest:
-            f_model = model.frequency_hz("roll_high")
-            high = min(rest, key=lambda i: abs(math.log(candidates[i]["frequency_hz"] / f_model)))
-            labels[high] = "roll_high"
-    return labels
 
 
 def _coherence_at(frf, frequency_hz: float, weights) -> float:

@@ -189,6 +189,8 @@ def best_layout(guide, runs: list[PlanRun], model) -> dict:
     sensors, then each layout with those hits."""
     import itertools
 
+    from guidefit.errors import GuidefitError
+
     names = [r.name for r in runs]
     cands = [_hit_candidates(guide, r) for r in runs]
     best_hits, best_score = None, None
@@ -198,23 +200,25 @@ def best_layout(guide, runs: list[PlanRun], model) -> dict:
         if best_score is None or score > best_score:
             best_hits, best_score = combo, score
     hits = dict(zip(names, best_hits))
+    budget = max((len(r.sensors) for r in runs), default=0)  # the DAQ's accelerometer channels per run
     rows = []
     for layout in SEARCH_LAYOUTS:
         try:
             trial = layout_runs(guide, layout, hits=None, run_names=names)
-        except Exception:  # a layout the guide cannot give (no side points, say)
+        except GuidefitError:  # a layout the guide cannot give (no side points, say)
             continue
         trial = [PlanRun(t.name, t.sensors, r.excitation_direction, hits[r.name]) for t, r in zip(trial, runs)]
         view = lab_mod.layout_view(model, {t.name: t.view() for t in trial})
-        rows.append((shape_score(view), layout, view))
-    own = ("(as planned)", shape_score(lab_mod.layout_view(
-        model, {r.name: PlanRun(r.name, r.sensors, r.excitation_direction, hits[r.name]).view() for r in runs})))
-    rows.append((own[1], own[0], None))
-    rows.sort(key=lambda t: (-t[0][0], -t[0][1], -t[0][2], len(t[1])))
-    score, layout, _ = rows[0]
+        rows.append((shape_score(view), layout, max(len(t.sensors) for t in trial)))
+    own = [PlanRun(r.name, r.sensors, r.excitation_direction, hits[r.name]) for r in runs]
+    rows.append((shape_score(lab_mod.layout_view(model, {r.name: r.view() for r in own})), "(as planned)", budget))
+    rows.sort(key=lambda t: (-t[0][0], -t[0][1], -t[0][2], t[2]))
+    fits = [r for r in rows if r[2] <= budget] or rows
+    score, layout, width = fits[0]
     return {"layout": layout, "hits": {k: list(v) for k, v in hits.items()}, "decided_by_shape": int(score[0]),
-            "seen": int(score[1]),
-            "layouts": [{"layout": lay, "decided_by_shape": int(s[0]), "seen": int(s[1])} for s, lay, _ in rows]}
+            "seen": int(score[1]), "sensors_per_run": int(width), "budget_sensors_per_run": int(budget),
+            "layouts": [{"layout": lay, "decided_by_shape": int(sc[0]), "seen": int(sc[1]), "sensors_per_run": int(w)}
+                        for sc, lay, w in rows]}
 
 
 def plan(source=None, guide=None, layout: str | None = None, hits: dict | None = None, search: bool = True) -> Plan:

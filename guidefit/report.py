@@ -288,9 +288,15 @@ def render_plan(result, as_json: bool = False, plot_path: str | None = None, con
     best = data.get("best")
     if best:
         hits = "; ".join(f"{r} at (" + ", ".join(f"{1e3 * x:.1f}" for x in h) + ") mm" for r, h in best["hits"].items())
-        console.print(f"best among the guide's points: layout {best['layout']} with hits {hits}: "
-                      f"{best['decided_by_shape']} of {len(data['modes'])} labels decided by shape alone "
-                      f"(this plan: {len(data['decided_by_shape'])})", highlight=False)
+        console.print(f"best among the guide's points with at most {best['budget_sensors_per_run']} sensors per "
+                      f"run: layout {best['layout']} with hits {hits}: {best['decided_by_shape']} of "
+                      f"{len(data['modes'])} labels decided by shape alone (this plan: "
+                      f"{len(data['decided_by_shape'])})", highlight=False)
+        more = [x for x in best["layouts"] if x["sensors_per_run"] > best["budget_sensors_per_run"]
+                and x["decided_by_shape"] > best["decided_by_shape"]]
+        if more:
+            console.print(f"with more channels: {more[0]['layout']} ({more[0]['sensors_per_run']} per run) decides "
+                          f"{more[0]['decided_by_shape']} by shape", highlight=False)
     if plot_path:
         console.print(f"plot written to {plot_path}")
 
