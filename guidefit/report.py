@@ -378,11 +378,13 @@ def render_identification(result, console=None) -> None:
                   box=box.SIMPLE_HEAD, pad_edge=False)
     for col in ("label", "run", "f_n (Hz)", "zeta", "model (Hz)", "coh.", "hp zeta"):
         modes.add_column(col, justify="right" if col != "label" else "left")
+    short = {"frequency": " (freq.)", "shape+frequency": " (both)"}
     for m in list(result.modes) + list(result.extra_modes):
         hp = m.half_power
         label = m.label
         if getattr(m, "candidates", ()):
             label += ": " + "/".join(str(c[0]) for c in m.candidates)
+        label += short.get(getattr(m, "label_basis", None), "")
         modes.add_row(
             label, m.run, _pm(m.frequency_hz, m.frequency_std_hz),
             _pm(m.damping_ratio, m.damping_std),
@@ -390,6 +392,11 @@ def render_identification(result, console=None) -> None:
             "-" if hp is None else f"{hp['zeta_window_corrected']:.4f} ({hp['bins_in_band']})",
         )
     console.print(modes)
+    console.print("labels: named by the mode's shape at the sensors; (freq.) by its frequency near the model's "
+                  "alone; (both) by the two together", highlight=False)
+    for m in result.modes:
+        if getattr(m, "label_basis", None) == "frequency":
+            console.print(f"  {m.label} at {m.frequency_hz:.0f} Hz: {m.label_note}", highlight=False)
     all_hits = result.hit_rows()
     rejected = [h for h in all_hits if not h["accepted"]]
     n_hits = len(all_hits)
