@@ -40,6 +40,7 @@ import hashlib
 import html
 import io
 import json
+import math
 from dataclasses import dataclass
 
 _STYLE = """
@@ -256,13 +257,33 @@ def _parameters_and_modes(res: ReportResults) -> list[str]:
                                                                                        m.frequency_std_hz)),
                           fmt(m.frequency_std_hz, "Hz", 2), f"{m.damping_ratio:.4f}", fmt(m.damping_std, "", 2),
                           fmt(m.model_frequency_hz, "Hz"), f"{m.coherence:.3f}",
-                          "-" if hp is None else f"{hp['zeta_window_corrected']:.4f}"])
+                          "-" if hp is None else f"{hp['zeta_window_corrected']:.4f}", _named_by(m)])
     parts += ["<h2>Modes</h2>",
-              _table(["label", "run", "f_n", "std", "zeta", "zeta std", "model", "coherence", "half-power zeta"],
-                     mode_rows)]
+              _table(["label", "run", "f_n", "std", "zeta", "zeta std", "model", "coherence", "half-power zeta",
+                      "named by"], mode_rows),
+              "<p>named by: what gave the label at these sensors (shape, frequency or both); an "
+              "<i>ambiguous</i> mode lists its candidate labels with their probabilities and gives no joint "
+              "parameter, force level or damping of a model mode; an <i>extra</i> mode is a peak the model does "
+              "not predict.</p>"]
     if ident.missing_modes:
         parts.append(f"<p class='warn'>model modes not observed: {_e(', '.join(map(str, ident.missing_modes)))}</p>")
     return parts
+
+
+def _named_by(mode) -> str:
+    """The label's basis (``shape``, ``frequency``, ``shape+frequency``) or an ambiguous mode's candidates."""
+    cands = getattr(mode, "candidates", ()) or ()
+    if mode.label == "ambiguous" and cands:
+        def one(c):
+            if isinstance(c, dict):
+                name, p = c.get("label"), c.get("probability")
+            else:
+                name, p = c[0], (c[1] if len(c) > 1 else None)
+            known = p is not None and math.isfinite(float(p))
+            return f"{name}" + (f" ({100 * float(p):.0f} %)" if known else "")
+        return "ambiguous: " + " or ".join(one(c) for c in cands)
+    basis = getattr(mode, "label_basis", None)
+    return basis or ("-" if mode.label != "extra" else "not a model mode")
 
 
 def _shapes(res: ReportResults) -> list[str]:

@@ -43,6 +43,7 @@ import numpy as np
 
 from guidefit.errors import IdentificationError
 from guidefit.modeshapes import (  # also re-exported: guidefit.identify.IdentifiedMode etc.
+    UNNAMED_LABELS,
     IdentifiedMode,
     _coherence_at,
     _half_power_entry,
@@ -509,6 +510,12 @@ def _force_levels(run, frf, rows, modes, settings, warnings: list) -> list[dict]
     :data:`REFIT_MIN_MAC`) gives a level without a frequency
     (``refit_failed``), and the mode is left out of its neighbours' refits of
     that bin.
+
+    Only modes with a model label get levels: a level names the model mode
+    whose trend it carries (``explain`` and the modes-file reader accept only
+    those). An ``extra`` mode is a neighbour in the others' refits; an
+    ``ambiguous`` one is refitted too (a bin that does not reproduce it
+    leaves it out of its neighbours' refits), but neither gives a level.
     """
     from guidefit import frf as frf_mod
     from guidefit.hits import HitSettings, iter_hits
@@ -543,6 +550,8 @@ def _force_levels(run, frf, rows, modes, settings, warnings: list) -> list[dict]
             kept = [(fit, lab) for fit, lab in run_fits if id(fit) not in failed]
             refits.update({id(m): _refit_in_band(sub, m.fit, kept) for m in fitted if id(m.fit) not in failed})
         for m in fitted:
+            if m.label in UNNAMED_LABELS:
+                continue  # an ambiguous mode: refitted above as a neighbour; a level needs a model label
             r, band = refits[id(m)]
             level = {"run": run.name, "label": m.label, "level": level_index,
                      "peak_force_n": float(np.mean(forces[members])),

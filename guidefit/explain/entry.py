@@ -6,7 +6,7 @@ from pathlib import Path
 
 from guidefit.errors import RecordingError
 from guidefit.explain.inputs import Explanation
-from guidefit.explain.modes_json import level_from, modes_from_result, read_modes_json
+from guidefit.explain.modes_json import is_unnamed_level, level_from, modes_from_result, read_modes_json
 from guidefit.explain.pipeline import explain_modes
 
 
@@ -44,7 +44,12 @@ def explain_identification(identification, candidates=None, progress=None) -> Ex
     raw_levels = data.pop("force_levels", None) or []
     modes, _, sensors, _ = modes_from_result(data, where)
     levels, notes = [], []
+    unnamed = sorted({str(e["label"]) for e in raw_levels if is_unnamed_level(e)})
+    if unnamed:  # identify gives none; a caller's own Identification may
+        notes.append(f"force levels of {' and '.join(unnamed)} modes not used: a level must name a model mode")
     for k, entry in enumerate(raw_levels):
+        if is_unnamed_level(entry):
+            continue
         try:
             levels.append(level_from(entry, f"{where}: force_levels entry {k}"))
         except RecordingError as exc:

@@ -10,6 +10,7 @@ import numpy as np
 from guidefit.errors import RecordingError
 from guidefit.explain.inputs import ForceLevel, MeasuredMode, Sensor
 from guidefit.explain.settings import CARRIAGE_LABELS, canonical_label
+from guidefit.modeshapes import UNNAMED_LABELS
 
 
 def _number(value, what: str, positive: bool = True, allow_none: bool = False):
@@ -74,6 +75,16 @@ def _mode_from(entry, what: str, default_label: str | None = None) -> MeasuredMo
     )
 
 
+def is_unnamed_level(entry) -> bool:
+    """True for a force-level entry of an ``extra`` or ``ambiguous`` mode (left out, not an error).
+
+    >>> is_unnamed_level({"label": "ambiguous"}), is_unnamed_level({"label": "vertical"})
+    (True, False)
+    """
+    return isinstance(entry, dict) and isinstance(entry.get("label"), str) \
+        and entry["label"].strip().lower() in UNNAMED_LABELS
+
+
 def level_from(entry, what: str) -> ForceLevel:
     if not isinstance(entry, dict):
         raise RecordingError(f"{what}: expected an object, got {type(entry).__name__}")
@@ -112,6 +123,10 @@ def modes_from_result(obj, where: str = "modes"):
     optional ``extra_modes``, ``sensors``, ``force_levels`` and
     ``parameters`` f_V/f_H, whose value and std complete the vertical and
     roll_low modes), an object with just ``modes``, or a plain list of modes.
+    Modes labelled ``ambiguous`` or ``extra`` (in ``modes`` or
+    ``extra_modes``) are kept as unnamed modes that explain pairs by
+    frequency; force levels labelled so are left out (a level must name a
+    model mode; any other unknown label is an error).
     Standard deviations may be named ``frequency_std_hz``, ``std_hz`` or ``std``.
 
     Examples
@@ -167,7 +182,11 @@ def modes_from_result(obj, where: str = "modes"):
             raise RecordingError(f"{what}: 'direction' must not be zero")
         sensors.append(Sensor(str(s["name"]), _vector3(s.get("position_m"), f"{what}: 'position_m'"),
                               tuple(d / np.linalg.norm(d))))
-    levels = [level_from(e, f"{where}: force_levels entry {k}") for k, e in enumerate(root.get("force_levels") or [])]
+    raw_levels = root.get("force_levels") or []
+    if not isinstance(raw_levels, list):
+        raise RecordingError(f"{where}: 'force_levels' must be a list")
+    levels = [level_from(e, f"{where}: force_levels entry {k}") for k, e in enumerate(raw_levels)
+              if not is_unnamed_level(e)]
     return modes, guide, sensors, levels
 
 

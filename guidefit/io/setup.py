@@ -494,10 +494,27 @@ def _select(setup: Setup, run: SetupRun, daq: DaqFile) -> list[tuple[SetupChanne
     if len(picked) < 2:
         first = next(setup.channels[n] for n in names if n != "force")
         raise daq.missing(first.source)
+    _check_distinct_sources(setup, run, daq, picked)
     for _, dc in picked:
         if np.dtype(dc.dtype).kind not in "fiu":
             raise SetupError(f"{daq.display}: channel '{dc.name}' holds {np.dtype(dc.dtype)}, not numbers")
     return picked
+
+
+def _check_distinct_sources(setup: Setup, run: SetupRun, daq: DaqFile, picked) -> None:
+    """Two guidefit channels of one run that read the same DAQ channel: a sensor moved between runs
+    under the same DAQ name (``acc_A_y`` and ``acc_A_x`` both ``Acc1``) read twice, which would make
+    the run's layout up. One line naming both and the key that settles it (the run's ``channels``)."""
+    seen: dict = {}
+    for ch, dc in picked:
+        key = (dc.name, repr(dc.key))
+        if key in seen:
+            fix = (f"list the channels this run recorded (runs.{run.name}.channels = [...]): a sensor moved "
+                   "between runs keeps its DAQ name" if run.channels is None
+                   else "a sensor is one channel")
+            raise SetupError(f"{setup.path}: runs.{run.name}: channels '{seen[key]}' and '{ch.name}' both read "
+                             f"'{dc.name}' of {daq.display}; {fix}")
+        seen[key] = ch.name
 
 
 def _has(daq: DaqFile, source: str) -> bool:
