@@ -58,7 +58,7 @@ from __future__ import annotations
 import contextlib
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -748,6 +748,49 @@ def _references(frfs: list, sel: np.ndarray):
     return np.stack(cols, axis=2)
 
 
+#: a column whose median coherence in the band is below this is noise to the stabilisation diagram
+DIAGRAM_MIN_COHERENCE = 0.5
+
+
+def _diagram_columns(frfs: list, sel: np.ndarray, groups: list) -> np.ndarray:
+    """Indices of the FRF columns the stabilisation diagram uses: all but those whose median coherence in the
+    band is below :data:`DIAGRAM_MIN_COHERENCE` (a z sensor that nothing in its run drives reads noise, and the
+    diagram normalises every column to unit RMS: two such columns of six left a 100 N run with no stable
+    pole). A run keeps all its columns when none passes; the refinement always fits every column."""
+    good = []
+    for x in frfs:
+        coh = getattr(x, "coherence", None)
+        n = len(x.channels)
+        if coh is None:
+            good.append(np.ones(n, bool))
+        else:
+            good.append(np.median(np.asarray(coh)[sel], axis=0) >= DIAGRAM_MIN_COHERENCE)
+    flags = np.concatenate(good) if good else np.zeros(0, bool)
+    for sl in groups:
+        if not np.any(flags[sl]):
+            flags[sl] = True
+    return np.flatnonzero(flags)
+
+
+def _regroup(groups: list, keep: np.ndarray) -> list:
+    """The run slices of the kept columns."""
+    out, start = [], 0
+    for sl in groups:
+        n = int(np.count_nonzero((keep >= sl.start) & (keep < sl.stop)))
+        out.append(slice(start, start + n))
+        start += n
+    return out
+
+
+def _padded(d: Stabilisation, keep: np.ndarray, n_cols: int) -> Stabilisation:
+    """A diagram of the kept columns with its participation on every column (zero on the others)."""
+    if keep.size == n_cols:
+        return d
+    full = np.zeros((d.participation.shape[0], n_cols), complex)
+    full[:, keep] = d.participation
+    return replace(d, participation=full)
+
+
 def _diagram(f, H, orders, refs, groups: list) -> Stabilisation:
     """The stabilisation diagram of all runs: poly-reference when the runs share channels and differ in
     hit (``refs``); else, with several runs, each run's own common-denominator diagram, the poles of all
@@ -838,7 +881,9 @@ def _global_fit(frf_by_run, band_hz, orders, jackknife, selection_spread, weight
     # the diagram only seeds the refinement: at most ~MAX_DIAGRAM_BINS bins (long records: every k-th)
     step = max(1, int(math.ceil(f.size / MAX_DIAGRAM_BINS)))
     refs = _references(frfs, sel_bins)
-    diagram = _diagram(f[::step], H[::step], orders, None if refs is None else refs[::step], list(runs.values()))
+    keep = _diagram_columns(frfs, sel_bins, list(runs.values()))
+    diagram = _padded(_diagram(f[::step], H[::step][:, keep], orders, None if refs is None else refs[::step],
+                               _regroup(list(runs.values()), keep)), keep, H.shape[1])
     selection = select_poles(diagram)
     if not selection.chosen:
         raise IdentificationError(f"global fit: no stable pole between {band[0]:.0f} and {band[1]:.0f} Hz")

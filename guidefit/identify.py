@@ -948,6 +948,9 @@ def _levels_agree(res, harder: dict) -> bool:
     if res is None or not res.modes:
         return False
     for m in res.modes:
+        seen = {e.get("run") for e in m.estimates if e.get("level") is None and e.get("frequency_hz") is not None}
+        if seen - set(harder) and set(harder) - seen:  # a softer run shows it, a harder one not: it moved away
+            return False
         for e in m.estimates:
             if e.get("run") not in harder or e.get("level") is not None or e.get("frequency_hz") is None:
                 continue
