@@ -943,14 +943,22 @@ def _levels_agree(res, harder: dict) -> bool:
     harder level's modes move (on MRB35 f_V -0.3 % at 1 kN, -18 % at 5 kN):
     then a shared-pole fit would average levels that differ. They agree when
     the global fit found modes and each harder run's own estimate of every
-    mode lies within max(3 std, 0.1 %) of the shared frequency.
+    mode lies within max(3 std, 0.1 %) of the shared frequency, and no harder
+    run has lost most of the modes a softer run shows (modes that moved far
+    leave a shared-pole fit without them: no estimate is no agreement).
     """
     if res is None or not res.modes:
         return False
+    soft_modes, shown = 0, dict.fromkeys(harder, 0)
     for m in res.modes:
         seen = {e.get("run") for e in m.estimates if e.get("level") is None and e.get("frequency_hz") is not None}
-        if seen - set(harder) and set(harder) - seen:  # a softer run shows it, a harder one not: it moved away
-            return False
+        if seen - set(harder):
+            soft_modes += 1
+            for h in seen & set(harder):
+                shown[h] += 1
+    if any(2 * n < soft_modes for n in shown.values()):  # a harder run lost most of the softer run's modes: moved
+        return False
+    for m in res.modes:
         for e in m.estimates:
             if e.get("run") not in harder or e.get("level") is not None or e.get("frequency_hz") is None:
                 continue
