@@ -805,12 +805,17 @@ def _diagram(f, H, orders, refs, groups: list) -> Stabilisation:
     """
     if refs is not None or len(groups) < 2:
         return lscf_stabilisation(f, H, orders, references=refs)
-    parts = []
-    for sl in groups:
+    def one(sl):
         try:
-            parts.append((sl, lscf_stabilisation(f, H[:, sl], orders)))
+            return sl, lscf_stabilisation(f, H[:, sl], orders)
         except IdentificationError:
-            continue
+            return None
+
+    # each run's diagram is independent: two threads (the solves and eigenvalues release the GIL)
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        parts = [p for p in pool.map(one, groups) if p is not None]
     if not parts:
         return lscf_stabilisation(f, H, orders)
     n_cols = H.shape[1]
