@@ -210,7 +210,7 @@ def write_csv(path, chans, data, fs, direction, meta=None, time_col=True, units=
     for k, v in meta.items():
         lines.append(f"# {k}: {v}")
     if rate_line:
-        lines.append(f"# sample_rate_hz: {fs!r}")
+        lines.append(f"# sample_rate_hz: {float(fs)!r}")
     lines.append("# excitation_direction: " + " ".join(repr(float(x)) for x in direction))
     if positions:
         lines.append("# positions_m: " + "; ".join(" ".join(repr(float(x)) for x in c[1]) for c in chans))

@@ -219,7 +219,7 @@ def test_wav_pcm24_with_full_scale(sim):
     sources = {name: k for k, name in enumerate(SENSORS)}
     scales = {name: fs_v[k] * 1000.0 / SENSORS[name][1] for k, name in enumerate(SENSORS)}  # unit per full scale
     text = setup_text(run_keys(data, lambda r: f"{r}.wav"), sources=sources,
-                      extra_channel=lambda name, mv: f"scale = {scales[name]!r}")
+                      extra_channel=lambda name, mv: f"scale = {float(scales[name])!r}")
     check_same(folder, text, data, ident, 1e-5)  # 24 bits of a full scale above both runs' peaks
 
 
