@@ -694,6 +694,20 @@ def _conservative_std(prob: _Shared, modes: list, poles=None) -> list:
     return out
 
 
+#: the equally weighted problem of the conservative std lifts no column above 1 / (this x the strongest's RMS)
+EQUAL_WEIGHT_FLOOR = 1e-2
+
+
+def _equal_scale(H: np.ndarray) -> np.ndarray:
+    """Column weights 1 / RMS (each FRF counts alike), but a column more than 100x weaker than the strongest
+    is lifted only to that level: a sensor that reads noise alone (a z sensor in a run that drives no z
+    motion) would otherwise weigh as much as a real one and its misfit (all of it) set the std of every
+    mode (triaxial layout: f_V std 2.9 Hz against a scatter of 0.002 Hz)."""
+    rms = np.sqrt(np.mean(np.abs(H) ** 2, axis=0))
+    floor = EQUAL_WEIGHT_FLOOR * float(rms.max()) if rms.size else 0.0
+    return 1.0 / np.where(rms > floor, rms, floor if floor > 0 else 1.0)
+
+
 def _nz(v) -> float:
     return float(v) if v is not None and math.isfinite(v) else 0.0
 
@@ -908,7 +922,7 @@ def _global_fit(frf_by_run, band_hz, orders, jackknife, selection_spread, weight
         # the noise-weighted fit is the efficient estimate; its std assumes the model exact and the noise
         # known. The same poles' std in the equally weighted problem also carries the misfit of the weak
         # channels: the larger of the two is reported
-        plain = _Shared(f, H, groups, shifts)
+        plain = _Shared(f, H, groups, shifts, scale=_equal_scale(H))
         plain.share = prob  # the same design at the same poles
         modes = _conservative_std(plain, modes, poles)
     jk = _jackknife(frfs, band, modes, prob, poles) if jackknife else [(None, None)] * len(modes)
