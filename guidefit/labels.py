@@ -16,15 +16,21 @@ have, all runs stacked, sign included:
 * **shape**: ``rho = 1 - MAC`` of ``m_k`` against ``a r_i`` with one scale
   ``a`` for every run whose hit point is known (a run without one gets its
   own scale: its participation is unknown), and the scale ``a`` itself (the
-  driving-point residue: 1 for the carriage mode on a well-scaled recording,
-  relative to the recording's common scale), negative ``a`` penalised;
+  driving-point residue: the carriage's share of the mode, 1 for a carriage
+  mode on a well-scaled recording; a recording off by a unit factor is
+  measured against its own common scale), negative ``a`` penalised. A rig
+  effect mixes the modes of one motion group (:func:`motion_groups`: the
+  roll pair turns in the u-phi plane), so ``r_i`` is the best motion of
+  mode ``i``'s group, with a prior on the mixing angle
+  (:data:`MIXING_ANGLE_STD`) and the cost profiled over it;
 * **frequency**: ``ln(f_k / f_i)`` with a prior std of :data:`FREQUENCY_LOG_STD`
   (wide enough for a soft rig that moves f_H by more than 50 %).
 
 The costs (negative log-likelihoods, up to constants) are added and one
 assignment of measured modes to model modes is solved over all of them at
 once (:func:`best_assignment`, exact); a measured mode may stay ``extra``
-(cost :data:`EXTRA_COST`) and a model mode may stay unmatched. A label is
+(:func:`extra_costs`: more, the more of it is carriage motion) and a model
+mode may stay unmatched. A label is
 **decided** when every assignment that takes it away costs at least
 :data:`DECIDE_MARGIN` more; ``label_basis`` says what decides it:
 ``"shape"``, ``"frequency"`` or ``"shape+frequency"`` (both, or only the two
@@ -143,7 +149,7 @@ def predicted_constants(model, runs: dict) -> list[dict]:
     ``r_ij = (S_j phi_i)(g_j . phi_i)``; for a run without a known hit point the
     participation is taken as the largest ``|d . T(p) phi_i|`` over the run's own
     sensor positions (a hammer hits near its sensors): a guess of the size only,
-    its scale is fitted freely (:func:`shape_fit`).
+    its scale is fitted freely (:func:`evidence`).
     """
     from guidefit.model.vibration import rigid_body_map
 

@@ -388,13 +388,9 @@ def _identify_frfs(frf_by_run, geometry, guide, settings, warnings, model) -> Mo
     from guidefit.modeshapes import sensor_matrix
 
     sensors = {r: sensor_matrix(geometry[r].channels) for r in gf.runs}
-    drive = {}
-    for r in gf.runs:
-        g = geometry[r]
-        if g.excitation_position_m is None:
-            drive[r] = None
-        else:
-            drive[r] = np.asarray(g.excitation_direction, float) @ vib.rigid_body_map(g.excitation_position_m)
+    from guidefit.labels import driving_row
+
+    drive = {r: driving_row(geometry[r].excitation_direction, geometry[r].excitation_position_m) for r in gf.runs}
     candidates = [_candidate(gf, k, sensors, drive, mass) for k in range(len(gf.modes))]
     return _labelled(gf, candidates, per_run, frf_by_run, geometry, model, warnings, band)
 

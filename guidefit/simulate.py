@@ -888,8 +888,9 @@ def hit_response(model: _Model, position_m, direction, pulses, t_s, sensor_posit
     d = np.asarray(direction, float)
     d = d / np.linalg.norm(d)
     sol = model.solution
-    sensor_rows = np.array([np.asarray(dr, float) @ vib.rigid_body_map(p)
-                            for p, dr in zip(sensor_positions_m, sensor_directions)])
+    from guidefit.labels import Sensor, sensor_matrix
+
+    sensor_rows = sensor_matrix([Sensor("", p, dr) for p, dr in zip(sensor_positions_m, sensor_directions)])
     b_q = np.zeros(sol.shapes.shape[0])
     b_q[:5] = d @ vib.rigid_body_map(position_m)
     if model.contacts is None:

@@ -236,7 +236,7 @@ def _checked_frequencies(measured, notes) -> tuple[list, list]:
 
 def _shape_sets(measured, guide, sensors, force_levels, notes) -> dict:
     """{channel names: ([mode index], [unit shape], rigid map, [scale])} of the modes with shapes."""
-    from guidefit.model.vibration import rigid_body_map
+    from guidefit.labels import sensor_matrix
 
     by_name = {s.name: s for s in sensors}
     channels = {c for m in measured if m.shape for c in m.shape}
@@ -256,8 +256,7 @@ def _shape_sets(measured, guide, sensors, force_levels, notes) -> dict:
             raise RecordingError(f"measured mode {i}: shape values must be finite")
         if not np.any(vals):
             continue
-        s_mat = np.array([np.asarray(by_name[c].direction, float) @ rigid_body_map(by_name[c].position_m)
-                          for c in names])
+        s_mat = sensor_matrix([by_name[c] for c in names])
         unit = real_unit(vals)
         s_std = shape_noise(unit, s_mat) if m.shape_std is None else max(float(m.shape_std), SHAPE_STD_FLOOR)
         s_std = max(s_std, level_shape_scatter(m, names, unit, force_levels))

@@ -54,6 +54,7 @@ def synthetic_modes(guide, effects=(), sensors=None, frequency_std: float = 1e-3
     >>> [m.label for m in modes]
     ['yaw', 'pitch', 'roll_low', 'vertical', 'roll_high']
     """
+    from guidefit.labels import sensor_matrix
     from guidefit.model import vibration as vib
     from guidefit.model.effects import Effect, apply_effects, make_effect, parse_effect
     from guidefit.model.effects.amplitude_dependence import amplitude_frequency, roller_modal
@@ -93,8 +94,7 @@ def synthetic_modes(guide, effects=(), sensors=None, frequency_std: float = 1e-3
             f = float(sol.frequencies_hz[j])
         shape = None
         if shape_std is not None and sensors:
-            a = np.array([np.asarray(sn.direction, float) @ vib.rigid_body_map(sn.position_m) @ sol.shapes[:5, j]
-                          for sn in sensors])
+            a = sensor_matrix(sensors) @ sol.shapes[:5, j]
             a = a + shape_std * np.linalg.norm(a) / math.sqrt(a.size) * rng.standard_normal(a.size)
             shape = {sn.name: float(x) for sn, x in zip(sensors, a)}
         modes.append(MeasuredMode(f * (1 + frequency_std * rng.standard_normal()), frequency_std * f,
