@@ -282,6 +282,18 @@ def test_nan_in_frf_h5(case, tmp_path):
     _one_line_exit_2(path, "run 'vertical'", "non-finite", "acc_B_x")
 
 
+@pytest.mark.parametrize("value", [-0.02, 0.0, np.inf])
+def test_exponential_window_of_no_positive_time_constant_is_refused(case, tmp_path, value):
+    """Was: tau <= 0 accepted, c_V 180 std off with exit 0 (the UFF reader refused the same value)."""
+    import h5py
+
+    path = tmp_path / "tau.h5"
+    path.write_bytes(case["frf_h5"].read_bytes())
+    with h5py.File(path, "r+") as f:
+        f["frf/vertical"].attrs["exp_window_tau_s"] = value
+    _one_line_exit_2(path, "run 'vertical'", "exp_window_tau_s", "seconds > 0")
+
+
 def test_mismatched_coherence_in_frf_h5(case, tmp_path):
     import h5py
 

@@ -426,11 +426,24 @@ def _dataset(g, key: str, where: str):
     return ds[()]
 
 
-def _optional_float(attrs, key: str) -> float | None:
+def _optional_float(attrs, key: str, where: str = "") -> float | None:
+    """A number attribute, None when absent or NaN (what the writer stores for "none")."""
     if key not in attrs:
         return None
-    v = float(np.asarray(attrs[key]).reshape(-1)[0])
+    try:
+        v = float(np.asarray(attrs[key]).reshape(-1)[0])
+    except (TypeError, ValueError, IndexError):
+        raise RecordingError(f"{where or 'frf file'}: attribute '{key}' is not a number") from None
     return None if math.isnan(v) else v
+
+
+def _optional_seconds(attrs, key: str, where: str) -> float | None:
+    """A time constant or width (s): absent/NaN is None, else it must be finite and > 0 (the UFF reader's rule:
+    an exponential window of tau <= 0 would make every damping correction wrong)."""
+    v = _optional_float(attrs, key, where)
+    if v is not None and not (math.isfinite(v) and v > 0):
+        raise RecordingError(f"{where}: attribute '{key}' = {v!r}; expected seconds > 0 (or absent: none)")
+    return v
 
 
 def _read_h5_run(display: str, root, name: str, guide):
@@ -466,15 +479,16 @@ def _read_h5_run(display: str, root, name: str, guide):
                                      f"values; expected finite {shape}")
     estimator = _text(a.get("estimator")) or "H1"
     n_avg = int(np.asarray(a.get("n_averages", 0)).reshape(-1)[0])
-    rate = _optional_float(a, "sample_rate_hz")
+    rate = _optional_float(a, "sample_rate_hz", where)
     notes = []
     if rate is None or rate <= 0:
         rate = 2.0 * float(f[-1])
         notes.append(f"run '{name}': no sample rate in the file; taken as twice the highest frequency ({rate:g} Hz)")
     frf = FrfSet(run=name, frequency_hz=f, channels=channels, H=H, coherence=coh, estimator=estimator,
-                 n_averages=n_avg, group_sums=sums, exp_window_tau_s=_optional_float(a, "exp_window_tau_s"),
-                 force_window_s=_optional_float(a, "force_window_s"),
-                 force_taper_s=_optional_float(a, "force_taper_s"), trigger_s=_optional_float(a, "trigger_s"),
+                 n_averages=n_avg, group_sums=sums, exp_window_tau_s=_optional_seconds(a, "exp_window_tau_s", where),
+                 force_window_s=_optional_seconds(a, "force_window_s", where),
+                 force_taper_s=_optional_float(a, "force_taper_s", where),
+                 trigger_s=_optional_float(a, "trigger_s", where),
                  sample_rate_hz=rate, fft_precision=_text(a.get("fft_precision")) or "double")
     geometry = {}
     for key, shape in (("excitation_direction", (3,)), ("positions_m", (len(channels), 3)),
