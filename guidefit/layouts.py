@@ -61,7 +61,7 @@ LAYOUTS = {
 
 #: Channel names of accelerometers, as the recording reader accepts them
 #: (``guidefit.io.records``).
-CHANNEL_RE = re.compile(r"^acc_([A-Za-z0-9]+)_([xyz])$")
+CHANNEL_RE = re.compile(r"^acc_([A-Za-z0-9]+)_([xyz])\Z")
 
 AXES = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
 DEFAULT_POINTS = ("A", "B", "C", "D")

@@ -214,3 +214,27 @@ def test_usage_errors_exit_2():
     assert code == 2
     code, _, _err = guidefit("predict", "--calibration", "magic")
     assert code == 2
+
+
+def test_channel_name_with_a_trailing_line_break_is_refused_in_one_line(tmp_path):
+    """Issue 21, item 10: the pattern's ``$`` matched before a final newline, so 'acc_A_y\\n' was a valid name
+    that then broke the CSV header."""
+    import shutil
+    from pathlib import Path
+
+    from click.testing import CliRunner
+
+    from guidefit.cli import main
+
+    path = tmp_path / "newline.h5"
+    shutil.copy(Path(__file__).resolve().parents[1] / "sample_data" / "mrb35_sample.h5", path)
+    with h5py.File(path, "r+") as f:
+        run = next(iter(f["runs"].values()))
+        ds = run["hits"] if "hits" in run else run["signals"]
+        names = [n.decode() if isinstance(n, bytes) else str(n) for n in ds.attrs["channel_names"]]
+        names[1] = names[1] + "\n"
+        ds.attrs["channel_names"] = names
+    out = CliRunner().invoke(main, ["identify", str(path)])
+    assert out.exit_code == 2, out.output
+    lines = [line for line in out.output.splitlines() if line.strip()]
+    assert len(lines) == 1 and "not recognised" in lines[0] and "\\n" in lines[0]

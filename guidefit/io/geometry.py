@@ -17,7 +17,7 @@ from guidefit.errors import RecordingError
 
 __all__ = ["default_channel_geometry", "default_points"]
 
-_ACC_RE = re.compile(r"^acc_([A-Za-z0-9]+)_([xyz])$")
+_ACC_RE = re.compile(r"^acc_([A-Za-z0-9]+)_([xyz])\Z")
 _AXES = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
 
 # Measuring points A-D of the MRB35 nominal model (physics notes, paper Figure 7).

@@ -67,7 +67,7 @@ FORCE_UNITS = {"N": 1.0}
 ACCELERATION_UNITS = {"m/s^2": 1.0, "g": STANDARD_GRAVITY}
 """Allowed units of acceleration channels and their factor to SI."""
 
-_ACC_RE = re.compile(r"^acc_([A-Za-z0-9]+)_([xyz])$")
+_ACC_RE = re.compile(r"^acc_([A-Za-z0-9]+)_([xyz])\Z")
 _READ_ERRORS = (OSError, KeyError, RuntimeError, ValueError, TypeError)
 
 
@@ -626,8 +626,9 @@ def _build_channels(where, names, units, positions, directions) -> tuple[tuple[C
             hint = " (names are case-sensitive)"
         elif name == "time":
             hint = " (a CSV's 'time' column must be its first column)"
+        shown = f"'{name}'" if name.isprintable() else repr(name)  # a line break in a name: one line still
         raise RecordingError(
-            f"{where}: channel '{name}' not recognised; expected 'force' or 'acc_<point>_<axis>' "
+            f"{where}: channel {shown} not recognised; expected 'force' or 'acc_<point>_<axis>' "
             f"with axis x, y or z, e.g. 'acc_A_y'{hint}"
         )
     n_force = names.count("force")
