@@ -143,6 +143,17 @@ def _refuse(outputs, inputs) -> None:
     refuse_inputs(outputs, inputs)
 
 
+#: what ``--plot`` writes (matplotlib's formats without optional packages)
+PLOT_SUFFIXES = (".png", ".pdf", ".svg")
+
+
+def _plot_file(plot_path) -> None:
+    """Exit 2 (one line) before any work when ``--plot`` names a file no figure can be written as."""
+    if plot_path and os.path.splitext(str(plot_path))[1].lower() not in PLOT_SUFFIXES:
+        raise click.BadParameter(f"'{plot_path}': a plot is written as {', '.join(PLOT_SUFFIXES)}",
+                                 param_hint="--plot")
+
+
 def _written(path):
     """Context manager: a temporary path beside ``path``, renamed onto it when complete."""
     from guidefit.outputs import replacing
@@ -185,6 +196,7 @@ def predict(guide_name, load_text, sweep_text, calibration, as_json, plot_path):
     from guidefit.predict import predict as run_predict
 
     _refuse([plot_path], [_guide_file(guide_name)])
+    _plot_file(plot_path)
     sweep = None
     if sweep_text not in (None, "auto"):
         try:
@@ -222,8 +234,7 @@ def plan_cmd(setup, guide_name, layout, hit_texts, no_search, as_json, plot_path
     from guidefit.plan import plan
 
     _refuse([plot_path], [setup, _guide_file(guide_name)])
-    if plot_path and not plot_path.lower().endswith(".png"):
-        raise click.BadParameter(f"'{plot_path}': the plot is a PNG file (.png)", param_hint="--plot")
+    _plot_file(plot_path)
     hits = {}
     for text in hit_texts:
         name, position = layouts.parse_hit(text)
@@ -326,6 +337,7 @@ def identify_cmd(files, guide_name, estimator, as_json, csv_path, summary_path, 
             Path(plot_path).with_stem(f"{Path(plot_path).stem}_{Path(path).stem}")) for path in files}
     summary_paths = [csv_path] if summary_path == csv_path else [csv_path, summary_path]  # "same as --csv"
     _refuse([*summary_paths, junit_path, *plot_targets.values()], [*files, check_path, _guide_file(guide_name)])
+    _plot_file(plot_path)
     spec = None
     if check_path:
         from guidefit.check import load_spec
@@ -530,6 +542,7 @@ def explain_cmd(recording, modes_path, guide_name, candidates, as_json, plot_pat
     if (recording is None) == (modes_path is None):
         raise click.UsageError("give a RECORDING or --modes FILE (one of them)")
     _refuse([plot_path], [recording, modes_path, _guide_file(guide_name)])
+    _plot_file(plot_path)
     names = _candidate_names(candidates)
     settings = _identify_settings(estimator, no_jackknife, fft_precision)
     source = modes_path or recording

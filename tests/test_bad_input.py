@@ -238,3 +238,21 @@ def test_channel_name_with_a_trailing_line_break_is_refused_in_one_line(tmp_path
     assert out.exit_code == 2, out.output
     lines = [line for line in out.output.splitlines() if line.strip()]
     assert len(lines) == 1 and "not recognised" in lines[0] and "\\n" in lines[0]
+
+
+@pytest.mark.parametrize("command", [["identify", "FILE"], ["explain", "FILE"], ["predict"], ["plan"]])
+def test_a_plot_no_figure_can_be_is_refused_before_any_work(tmp_path, command):
+    """Issue 21, item 11: ``--plot out.csv`` was found after the whole run (an internal error, exit 1)."""
+    from pathlib import Path
+
+    from click.testing import CliRunner
+
+    from guidefit.cli import main
+
+    sample = str(Path(__file__).resolve().parents[1] / "sample_data" / "mrb35_sample.h5")
+    args = [sample if a == "FILE" else a for a in command] + ["--plot", str(tmp_path / "out.csv")]
+    out = CliRunner().invoke(main, args)
+    assert out.exit_code == 2, out.output
+    lines = [line for line in out.output.splitlines() if line.strip()]
+    assert len(lines) == 1 and "--plot" in lines[0] and ".png" in lines[0]
+    assert not (tmp_path / "out.csv").exists()

@@ -141,7 +141,7 @@ def test_cli_table_json_and_plot(tmp_path):
     (["--hit", "vertical"], "RUN:x,y,z"),
     (["--hit", "sideways:0,0,0"], "sideways"),
     (["--hit", "vertical:0,0,0", "--hit", "vertical:0,0,0.01"], "twice"),
-    (["--plot", "mac.csv"], ".png"),
+    (["--plot", "mac.csv"], ".png, .pdf, .svg"),
 ])
 def test_bad_input_is_one_line_exit_2(args, words):
     out = CliRunner().invoke(main, ["plan", *args, "--no-search"])
