@@ -459,11 +459,10 @@ def _fit_run(run, frf, guide, model, settings, warnings: list) -> list[Identifie
         norm = np.linalg.norm(q) or 1.0
         q = q / norm
         energy = energy_shares(q, mass)
-        contrib = np.abs(q * (mass @ q))
         f_std, z_std = mode.frequency_std_hz, mode.damping_std
         candidates.append({
             "mode": mode, "frequency_hz": f_n, "damping_ratio": zeta, "q": q, "energy": energy,
-            "u_energy": contrib[0], "phi_energy": contrib[4], "shape": shape,
+            "shape": shape,
             "f_std": f_std, "z_std": z_std,
         })
     candidates = _significant(candidates)

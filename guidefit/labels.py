@@ -59,7 +59,7 @@ Examples
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -86,7 +86,6 @@ COMMON_SCALE_FACTOR = 3.0
 #: prior std (rad) of the mixing angle of a two-mode group (the roll pair) away from the model's
 MIXING_ANGLE_STD = 0.35
 
-BASES = ("shape", "frequency", "shape+frequency")
 
 
 # --------------------------------------------------------------------------- the layout
@@ -453,7 +452,6 @@ class Label:
     margin: float  # cost margin of the decision (inf: no alternative)
     candidates: tuple = ()  # ambiguous: ((label or "label at F Hz", probability), ...)
     note: str = ""  # one plain sentence
-    costs: dict = field(default_factory=dict)  # shape / frequency / combined cost of the chosen pair
     shape_margin: float = math.nan  # what the shape alone would lose by another label (>= DECIDE_MARGIN: decides)
     frequency_margin: float = math.nan  # the same for the frequency alone
 
@@ -491,7 +489,7 @@ def label_modes(measured: list[Measured], runs: dict, model, predicted: list[dic
     comb, shp, frq = (x[:, offered] for x in (ev.combined, ev.shape, ev.frequency))
     extra = extra_costs(ev)
     _, assign = best_assignment(comb, extra)
-    out = []
+    out, rivals = [], {}
     for k in range(n):
         j = assign[k]
         if j is None:
@@ -502,62 +500,54 @@ def label_modes(measured: list[Measured], runs: dict, model, predicted: list[dic
         i = int(offered[j])
         d_comb, alt = _margin(comb, extra, assign, k, allow_extra=True)
         d_shape, alt_s = _margin(shp, extra, assign, k, allow_extra=False)
-        d_freq, alt_f = _margin(frq, extra, assign, k, allow_extra=False)
+        d_freq, _ = _margin(frq, extra, assign, k, allow_extra=False)
         by_shape, by_freq = d_shape >= DECIDE_MARGIN, d_freq >= DECIDE_MARGIN
         basis = "shape+frequency" if (by_shape == by_freq) else ("shape" if by_shape else "frequency")
-        costs = {"shape": float(shp[k, j]), "frequency": float(frq[k, j]), "combined": float(comb[k, j])}
         mac = 1.0 - float(ev.rho[k, i])
         if d_comb < DECIDE_MARGIN:
-            other = _alternative(alt, k, j, offered, labels, measured)
+            other, rival = _alternative(alt, k, j, offered, labels, measured)
             p = 1.0 / (1.0 + math.exp(-max(d_comb, 0.0)))
-            mine = labels[i]
-            if other.startswith(f"{labels[i]} at "):  # another mode would take the label
-                mine = f"{labels[i]} at {measured[k].frequency_hz:.0f} Hz"
+            mine = labels[i] if rival is None else f"{labels[i]} at {measured[k].frequency_hz:.0f} Hz"
             cands = ((mine, p), (other, 1.0 - p))
-            note = (f"neither shape nor frequency tells {mine} from {other} on these sensors "
-                    f"(evidence ratio {math.exp(max(d_comb, 0.0)):.1f}:1)")
-            out.append(Label("ambiguous", None, labels[i], mac, _fin(ev.scale[k, i]), float(d_comb), cands, note,
-                             costs, float(d_shape), float(d_freq)))
+            out.append(Label("ambiguous", None, labels[i], mac, _fin(ev.scale[k, i]), float(d_comb), cands,
+                             _ambiguous_note(cands, d_comb), float(d_shape), float(d_freq)))
+            if rival is not None:
+                rivals[rival] = k
             continue
         note = _decided_note(basis, labels[i], mac, measured[k].frequency_hz, float(model.frequencies_hz[i]),
-                             alt_s, alt_f, d_shape, d_freq, k, offered, labels)
-        out.append(Label(labels[i], basis, labels[i], mac, _fin(ev.scale[k, i]), float(d_comb), (), note, costs,
+                             alt_s, d_shape, d_freq, k, offered, labels)
+        out.append(Label(labels[i], basis, labels[i], mac, _fin(ev.scale[k, i]), float(d_comb), (), note,
                          float(d_shape), float(d_freq)))
-    return _contenders(out, measured)
-
-
-def _contenders(out: list, measured: list) -> list:
-    """A mode left extra that another mode's ambiguity names ("vertical at 5097 Hz") is ambiguous too."""
-    for k, lab in enumerate(out):
-        if lab.label != "ambiguous" or len(lab.candidates) < 2:
-            continue
-        other = str(lab.candidates[1][0])
-        if " at " not in other:
-            continue
-        f_other = float(other.split(" at ")[1].split()[0])
-        j = min(range(len(measured)), key=lambda i: abs(measured[i].frequency_hz - f_other))
-        if j != k and out[j].label == "extra":
-            cands = ((lab.candidates[1][0], lab.candidates[1][1]), (lab.candidates[0][0], lab.candidates[0][1]))
-            out[j] = Label("ambiguous", None, lab.model_label, out[j].mac, out[j].scale, lab.margin, cands,
-                           f"neither shape nor frequency tells {cands[0][0]} from {cands[1][0]} on these sensors",
-                           {}, out[j].shape_margin, out[j].frequency_margin)
+    for rival, k in rivals.items():  # the mode that would take an ambiguous label is not told apart either
+        if out[rival].label == "extra":
+            lab = out[k]
+            cands = (lab.candidates[1], lab.candidates[0])
+            out[rival] = Label("ambiguous", None, lab.model_label, out[rival].mac, out[rival].scale, lab.margin,
+                               cands, _ambiguous_note(cands, lab.margin), out[rival].shape_margin,
+                               out[rival].frequency_margin)
     return out
+
+
+def _ambiguous_note(cands, margin: float) -> str:
+    return (f"neither shape nor frequency tells {cands[0][0]} from {cands[1][0]} on these sensors "
+            f"(evidence ratio {math.exp(max(margin, 0.0)):.1f}:1)")
 
 
 def _fin(x) -> float | None:
     return float(x) if x is not None and np.isfinite(x) else None
 
 
-def _alternative(alt, k, j, offered, labels, measured) -> str:
-    """What row k's label would be in the alternative assignment, or which mode would take its label."""
+def _alternative(alt, k, j, offered, labels, measured) -> tuple[str, int | None]:
+    """What row k's label would be in the alternative assignment, or which mode (its index, the rival) would
+    take its label."""
     if alt is None:
-        return "extra"
+        return "extra", None
     if alt[k] is not None:
-        return labels[int(offered[alt[k]])]
-    other = next((kk for kk, jj in enumerate(alt) if jj == j), None)
-    if other is None:
-        return "extra"
-    return f"{labels[int(offered[j])]} at {measured[other].frequency_hz:.0f} Hz"
+        return labels[int(offered[alt[k]])], None
+    rival = next((kk for kk, jj in enumerate(alt) if jj == j), None)
+    if rival is None:
+        return "extra", None
+    return f"{labels[int(offered[j])]} at {measured[rival].frequency_hz:.0f} Hz", rival
 
 
 def _extra_note(ev, k, i_best, labels) -> str:
@@ -565,7 +555,7 @@ def _extra_note(ev, k, i_best, labels) -> str:
             f"{1.0 - float(ev.rho[k, i_best]):.2f} with its predicted readings)")
 
 
-def _decided_note(basis, label, mac, f_meas, f_model, alt_s, alt_f, d_shape, d_freq, k, offered, labels) -> str:
+def _decided_note(basis, label, mac, f_meas, f_model, alt_s, d_shape, d_freq, k, offered, labels) -> str:
     shift = f"{100.0 * (f_meas / f_model - 1.0):+.1f} % from the model's {f_model:.0f} Hz"
     alt_shape = labels[int(offered[alt_s[k]])] if alt_s and alt_s[k] is not None else None
     if basis == "shape":
@@ -592,11 +582,6 @@ class LayoutView:
     visible: tuple  # bool per model mode
     auto_mac: np.ndarray  # (n_modes, n_modes) MAC of the predicted readings, all runs stacked
     decided: tuple  # per model mode: the Label the labeller gives its own predicted readings (None: not visible)
-
-    def basis(self, label: str) -> str | None:
-        i = self.labels.index(label)
-        d = self.decided[i]
-        return None if d is None else (d.basis if d.label == label else "ambiguous")
 
 
 def layout_view(model, runs: dict) -> LayoutView:

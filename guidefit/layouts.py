@@ -290,15 +290,36 @@ def read_layout_file(path, guide, runs) -> dict[str, tuple[SensorSpec, ...]]:
     >>> {run: [s.name for s in sensors] for run, sensors in out.items()}
     {'vertical': ['acc_A_y'], 'lateral': ['acc_A_y', 'acc_E_x']}
     """
-    import tomllib
-
     if isinstance(guide, str | Path):
         from guidefit.model.guides import load_guide
 
         guide = load_guide(guide)
-    runs = tuple(runs)
     path = Path(path)
     where = f"layout {path}"
+    sensors = _sensor_tables(path, where)
+    run_names = [r.name for r in runs]
+    out: dict[str, list[SensorSpec]] = {name: [] for name in run_names}
+    for i, entry in enumerate(sensors):
+        spec, at = _sensor_spec(entry, f"{where}: sensor[{i}]", guide)
+        targets = entry.get("runs", run_names)
+        if not isinstance(targets, list) or not all(isinstance(t, str) for t in targets) or not targets:
+            raise ModelError(f"{at}: key 'runs' must be a non-empty list of run names")
+        for t in targets:
+            if t not in out:
+                raise ModelError(f"{at}: key 'runs': run '{t}' not simulated; have {', '.join(run_names)}")
+            if any(s.name == spec.name for s in out[t]):
+                raise ModelError(f"{at}: channel '{spec.name}' twice in run '{t}'")
+            out[t].append(spec)
+    for name, specs in out.items():
+        if not specs:
+            raise ModelError(f"{where}: run '{name}' has no sensor (give it one or list it in a sensor's 'runs')")
+    return {name: tuple(specs) for name, specs in out.items()}
+
+
+def _sensor_tables(path: Path, where: str) -> list[dict]:
+    """The ``[[sensor]]`` tables of a layout file, read and checked for shape (one-line errors)."""
+    import tomllib
+
     if not path.is_file():
         raise ModelError(f"{where}: no such file")
     try:
@@ -321,41 +342,31 @@ def read_layout_file(path, guide, runs) -> dict[str, tuple[SensorSpec, ...]]:
         raise ModelError(f"{where}: key 'sensor' must be one or more [[sensor]] tables")
     if len(sensors) > MAX_SENSORS:
         raise ModelError(f"{where}: {len(sensors)} sensors; at most {MAX_SENSORS}")
-    run_names = [r.name for r in runs]
-    out: dict[str, list[SensorSpec]] = {name: [] for name in run_names}
-    for i, entry in enumerate(sensors):
-        at = f"{where}: sensor[{i}]"
-        for key in entry:
-            if key not in _SENSOR_KEYS:
-                raise ModelError(f"{at}: unknown key '{key}'; allowed: {', '.join(_SENSOR_KEYS)}")
-        name = entry.get("name")
-        if not isinstance(name, str):
-            raise ModelError(f"{at}: key 'name' missing or not a string; expected a channel name such as 'acc_E_x'")
-        match = CHANNEL_RE.match(name)
-        if not match:
-            raise ModelError(f"{at}: key 'name' = {name!r}; expected 'acc_<point>_<axis>' with axis x, y or z")
-        at = f"{where}: sensor[{i}] ({name})"
-        point, axis = match.groups()
-        if "position_m" in entry:
-            position = _vector(entry["position_m"], at, "position_m", nonzero=False)
-        elif point in guide.measuring_points_m:
-            position = tuple(float(v) for v in guide.measuring_points_m[point])
-        else:
-            raise ModelError(f"{at}: key 'position_m' missing and guide {guide.name} defines no point '{point}'")
-        direction = _vector(entry["direction"], at, "direction", nonzero=True) if "direction" in entry else AXES[axis]
-        targets = entry.get("runs", run_names)
-        if not isinstance(targets, list) or not all(isinstance(t, str) for t in targets) or not targets:
-            raise ModelError(f"{at}: key 'runs' must be a non-empty list of run names")
-        for t in targets:
-            if t not in out:
-                raise ModelError(f"{at}: key 'runs': run '{t}' not simulated; have {', '.join(run_names)}")
-            if any(s.name == name for s in out[t]):
-                raise ModelError(f"{at}: channel '{name}' twice in run '{t}'")
-            out[t].append(SensorSpec(name, position, direction))
-    for name, specs in out.items():
-        if not specs:
-            raise ModelError(f"{where}: run '{name}' has no sensor (give it one or list it in a sensor's 'runs')")
-    return {name: tuple(specs) for name, specs in out.items()}
+    return sensors
+
+
+def _sensor_spec(entry: dict, at: str, guide) -> tuple[SensorSpec, str]:
+    """One ``[[sensor]]`` table as a SensorSpec (position and direction defaulted from the guide and the
+    name), and the text that names it in errors."""
+    for key in entry:
+        if key not in _SENSOR_KEYS:
+            raise ModelError(f"{at}: unknown key '{key}'; allowed: {', '.join(_SENSOR_KEYS)}")
+    name = entry.get("name")
+    if not isinstance(name, str):
+        raise ModelError(f"{at}: key 'name' missing or not a string; expected a channel name such as 'acc_E_x'")
+    match = CHANNEL_RE.match(name)
+    if not match:
+        raise ModelError(f"{at}: key 'name' = {name!r}; expected 'acc_<point>_<axis>' with axis x, y or z")
+    at = f"{at} ({name})"
+    point, axis = match.groups()
+    if "position_m" in entry:
+        position = _vector(entry["position_m"], at, "position_m", nonzero=False)
+    elif point in guide.measuring_points_m:
+        position = tuple(float(v) for v in guide.measuring_points_m[point])
+    else:
+        raise ModelError(f"{at}: key 'position_m' missing and guide {guide.name} defines no point '{point}'")
+    direction = _vector(entry["direction"], at, "direction", nonzero=True) if "direction" in entry else AXES[axis]
+    return SensorSpec(name, position, direction), at
 
 
 def _vector(value, at: str, key: str, nonzero: bool) -> tuple[float, float, float]:

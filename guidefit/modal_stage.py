@@ -55,9 +55,6 @@ import numpy as np
 
 from guidefit.errors import IdentificationError
 
-#: second energy group within this share of the first: the label is ambiguous
-AMBIGUOUS_RATIO = 0.8
-
 
 @dataclass(frozen=True)
 class _DefaultSettings:
@@ -392,21 +389,16 @@ def _identify_frfs(frf_by_run, geometry, guide, settings, warnings, model) -> Mo
 
     drive = {r: driving_row(geometry[r].excitation_direction, geometry[r].excitation_position_m) for r in gf.runs}
     candidates = [_candidate(gf, k, sensors, drive, mass) for k in range(len(gf.modes))]
-    return _labelled(gf, candidates, per_run, frf_by_run, geometry, model, warnings, band)
+    return _labelled(gf, candidates, per_run, frf_by_run, geometry, model, warnings, band, guide.mass_kg)
 
 
 #: DOF indices (u, v, theta, psi, phi) of each kinetic-energy group
 GROUP_DOFS = {"v": (1,), "theta": (2,), "psi": (3,), "u_phi": (0, 4)}
-#: label named for a group in an ambiguity
-GROUP_NAME = {"v": "vertical", "theta": "pitch", "psi": "yaw", "u_phi": "roll"}
 #: a motion hypothesis whose mass-normalised carriage energy q^T M q exceeds this is impossible (the carriage
 #: cannot hold more than the mode's whole kinetic energy; the margin allows for calibration error)
 MAX_CARRIAGE_ENERGY = 1.5
 #: relative residual of the modal constants a group hypothesis may leave (or twice the full fit's)
 HYPOTHESIS_RELRES = 0.15
-#: the best hypothesis decides only when it puts at least this share of the mode's energy in the carriage (the
-#: choice by carriage energy rests on the recording's scale: a force read 1000x high makes every share ~1e-3)
-MIN_DECIDING_ENERGY = 0.3
 
 
 def groups_separable(N: np.ndarray) -> bool:
@@ -429,7 +421,7 @@ def _relres(q, constants, sensors, drive, runs) -> float:
 
 
 def _resolve_groups(q, observed, scale, constants, sensors, drive, mass):
-    """Which carriage motion a mode is when the sensors see only mixtures of two groups' DOFs.
+    """The carriage motion of a mode when the sensors see only mixtures of two groups' DOFs.
 
     Points A and B alone (same z) read ``v - z theta`` and ``u + z psi``: the
     least-energy motion splits a vertical mode between v and theta. Each
@@ -437,20 +429,18 @@ def _resolve_groups(q, observed, scale, constants, sensors, drive, mass):
     (sensor readings times hit-point motion, mass-normalised); a hypothesis
     that leaves a large residual, or needs more kinetic energy in the carriage
     than the mode has (``q^T M q`` above :data:`MAX_CARRIAGE_ENERGY`), is out.
-    Of the rest the one with most carriage energy is taken; a second within
-    :data:`AMBIGUOUS_RATIO` of it, or a best one below :data:`MIN_DECIDING_ENERGY`
-    (a scale error makes every share small and the largest one says nothing),
-    leaves the label ambiguous (``unresolved``: ``((label, carriage energy), ...),
-    reason``). Returns ``(q, observed, unresolved)``.
+    Of the rest the one with most carriage energy is taken. The motion is a
+    product (mode shapes, the sensor check); the label comes from
+    :mod:`guidefit.labels`. Returns ``(q, observed)``.
     """
     runs = [r for r in constants if np.any(constants[r])]
     top = max((abs(s) for s in scale.values()), default=0.0) or 1.0
     seen = [r for r in runs if abs(scale.get(r, 0.0)) > 0.05 * top]
     if not seen:
-        return q, observed, ()
+        return q, observed
     S = np.vstack([sensors[r] for r in seen])
     if groups_separable(null_space(S)):
-        return q, observed, ()
+        return q, observed
     base = _relres(q, constants, sensors, drive, runs)
     fits = []
     for g, dofs in GROUP_DOFS.items():
@@ -461,19 +451,8 @@ def _resolve_groups(q, observed, scale, constants, sensors, drive, mass):
         if rel <= max(HYPOTHESIS_RELRES, 2.0 * base) and energy <= MAX_CARRIAGE_ENERGY:
             fits.append((energy, g, qg))
     if not fits:
-        return q, observed, ()
-    fits.sort(key=lambda t: -t[0])
-    e1, g1, q1 = fits[0]
-    unresolved = ()
-    if len(fits) > 1 and (fits[1][0] >= AMBIGUOUS_RATIO * e1 or e1 < MIN_DECIDING_ENERGY):
-        why = ("the sensors see only a mix of these motions and the hit-point residues fit both (carriage "
-               "energy q^T M q of each given)")
-        if e1 < MIN_DECIDING_ENERGY:
-            why = ("the sensors see only a mix of these motions and neither makes it a carriage mode at this "
-                   f"recording's scale (q^T M q below {MIN_DECIDING_ENERGY:g}: force or acceleration scale off, "
-                   "or not a carriage mode)")
-        unresolved = (((GROUP_NAME[g1], e1), (GROUP_NAME[fits[1][1]], fits[1][0])), why)
-    return q1, np.ones(5, bool), unresolved
+        return q, observed
+    return max(fits, key=lambda t: t[0])[2], np.ones(5, bool)
 
 
 def _candidate(gf, k, sensors, drive, mass) -> dict:
@@ -486,22 +465,18 @@ def _candidate(gf, k, sensors, drive, mass) -> dict:
     # the driven fit reaches motion the sensors cannot see through the hit-point rows: keep it to the
     # least-energy completion of what they do see (the non-driven path keeps its per-DOF rules)
     q, scale, observed = assemble_motion(constants, sensors, drive, mass=mass if driven else None)
-    unresolved = ()
     if driven:
-        q, observed, unresolved = _resolve_groups(q, observed, scale, constants, sensors, drive, mass)
+        q, observed = _resolve_groups(q, observed, scale, constants, sensors, drive, mass)
     norm = np.linalg.norm(q) or 1.0
     qn = q / norm
-    contrib = np.abs(qn * (mass @ qn))
     amps = {r: float(np.linalg.norm(c)) for r, c in constants.items()}
     primary = max(amps, key=amps.get)
     carriage = float(q @ mass @ q) if driven else None
-    return {"k": k, "mode": m, "carriage_energy": carriage, "frequency_hz": m.frequency_hz, "damping_ratio": m.damping_ratio, "q": qn,
-            "q_raw": q, "energy": energy_shares(qn, mass), "u_energy": contrib[0], "phi_energy": contrib[4],
-            "shape": mc, "constants": constants, "primary": primary, "observed": observed, "scale": scale,
-            "unresolved": unresolved}
+    return {"k": k, "mode": m, "carriage_energy": carriage, "frequency_hz": m.frequency_hz, "q": qn,
+            "energy": energy_shares(qn, mass), "constants": constants, "primary": primary}
 
 
-def _labelled(gf, candidates, per_run, frf_by_run, geometry, model, warnings, band) -> ModalResult:
+def _labelled(gf, candidates, per_run, frf_by_run, geometry, model, warnings, band, mass_kg) -> ModalResult:
     from guidefit import labels as lab_mod
     from guidefit import modeshapes as ident
 
@@ -513,7 +488,7 @@ def _labelled(gf, candidates, per_run, frf_by_run, geometry, model, warnings, ba
     decided = lab_mod.label_modes(measured, views, model, predicted, ev)
     if ev.common_scale != 1.0:
         warnings.append(f"the modal constants are {abs(ev.common_scale):.3g} times those the model predicts for a "
-                        f"carriage of {guide_mass(model):.3g} kg at these sensors: a force or acceleration unit or "
+                        f"carriage of {mass_kg:.3g} kg at these sensors: a force or acceleration unit or "
                         "sensitivity is off by about that factor (labels were made at the recording's own scale)")
     visible = dict(zip(model.labels, lab_mod.visible_modes(predicted)))
     modes, extras = [], []
@@ -575,13 +550,6 @@ def _labelled(gf, candidates, per_run, frf_by_run, geometry, model, warnings, ba
     missing = [lab for lab in missing if lab not in told]
     return ModalResult(sorted(modes, key=lambda m: m.frequency_hz), sorted(extras, key=lambda m: m.frequency_hz),
                        missing, gf, per_run, band)
-
-
-def guide_mass(model) -> float:
-    """The carriage mass (kg) behind a model's mass-normalised shapes (from its vertical mode)."""
-    i = int(np.argmax(np.asarray(model.energy_fractions)[:, 0]))
-    v = float(np.asarray(model.shapes)[1, i])
-    return 1.0 / (v * v) if v else float("nan")
 
 
 def _candidate_labels(extras) -> dict:

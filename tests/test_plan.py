@@ -71,9 +71,10 @@ def test_plan_agrees_with_identify_on_a_simulated_recording(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         result = identify(path, settings=IdentifySettings(jackknife=False))
-    for m in result.modes:
-        if p.basis[m.label] == "shape":  # what the layout decides by shape, the data do too
-            assert m.label_basis in ("shape", "shape+frequency")
+    by_shape = [m for m in result.modes if p.basis[m.label] == "shape"]
+    assert {m.label for m in by_shape} >= {"vertical", "pitch", "yaw"}
+    for m in by_shape:  # what the layout decides by shape, the data do too
+        assert m.label_basis in ("shape", "shape+frequency")
 
 
 def _setup(folder):
