@@ -60,38 +60,32 @@ def _ls_solver(A: np.ndarray):
     """``V -> (A^T A)^-1 V`` by a Cholesky factor of the normal matrix, or ``None``.
 
     ``None`` when ``A^T A`` is not numerically positive definite (rank-deficient
-    ``A``); callers then fall back to an SVD solve. LAPACK's ``potrf`` and
-    ``potrs`` are called directly: they are what ``scipy.linalg.cho_factor``
-    and ``cho_solve`` run (same arguments, same numbers), without their
-    argument checks, which cost as much as the factorisation of these small
-    matrices (the global fit factorises a few hundred of them).
+    ``A``); callers then fall back to an SVD solve. The inverse of the factor
+    is formed once (these normal matrices are small, a few dozen columns, and
+    one solver serves many right-hand sides), so that each solve is two matrix
+    products. numpy.linalg, not scipy.linalg: importing scipy.linalg costs
+    50-80 ms, a tenth of an identify run, and its triangular solves are not
+    needed for matrices this size.
     """
-    potrf, potrs = _cholesky_lapack()
-    factor, info = potrf(A.T @ A, lower=False, overwrite_a=False, clean=False)
-    if info > 0:
+    factor_inverse = _cholesky_inverse(A.T @ A)
+    if factor_inverse is None:
         return None
-    if info < 0:  # pragma: no cover - a malformed argument
-        raise ValueError(f"illegal value in argument {-info} of LAPACK potrf")
 
     def solve(V):
-        x, info = potrs(factor, V, lower=False, overwrite_b=False)
-        if info != 0:  # pragma: no cover - a malformed argument
-            raise ValueError(f"illegal value in argument {-info} of LAPACK potrs")
-        return x
+        return factor_inverse.T @ (factor_inverse @ V)
 
     return solve
 
 
-_LAPACK: list = []
-
-
-def _cholesky_lapack():
-    """LAPACK ``dpotrf`` and ``dpotrs`` (scipy.linalg.lapack), looked up once."""
-    if not _LAPACK:
-        from scipy.linalg import lapack
-
-        _LAPACK.extend([lapack.dpotrf, lapack.dpotrs])
-    return _LAPACK[0], _LAPACK[1]
+def _cholesky_inverse(N: np.ndarray) -> np.ndarray | None:
+    """``L^-1`` of the Cholesky factor ``N = L L^T`` of a symmetric matrix, or ``None`` when ``N``
+    is not numerically positive definite (or not finite)."""
+    try:
+        factor = np.linalg.cholesky(N)
+    except np.linalg.LinAlgError:
+        return None
+    inverse = np.linalg.solve(factor, np.eye(N.shape[0]))
+    return inverse if np.all(np.isfinite(inverse)) else None
 
 
 def _ls_fit(A: np.ndarray, Y: np.ndarray, solver=None):

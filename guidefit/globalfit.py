@@ -158,12 +158,11 @@ _CONTROLLER: list = []
 def _blas_controller():
     """The process's threadpoolctl controller (None without threadpoolctl), made on first use.
 
-    scipy.linalg is imported first so that its own BLAS (a second OpenBLAS
-    in the wheels) is loaded when the libraries are scanned, and limited too.
+    The fit's linear algebra is numpy's (numpy.linalg and matrix products), so
+    numpy's BLAS is the one to limit; scipy.linalg is not imported for it.
     """
     if not _CONTROLLER:
         try:
-            import scipy.linalg  # noqa: F401  (loads scipy's BLAS before the scan)
             from threadpoolctl import ThreadpoolController
         except ImportError:  # pragma: no cover - threadpoolctl is a dependency
             _CONTROLLER.append(None)
@@ -196,18 +195,16 @@ def _reduced_matrices(f: np.ndarray, H3: np.ndarray, n_max: int, ts: float):
 
 def _lscf_poles(R, S, T, n: int, m: int, ts: float) -> np.ndarray:
     """Poles (rad/s) of the right matrix-fraction denominator of order n (highest coefficient I_m)."""
-    from guidefit.curvefit import _cholesky_lapack
+    from guidefit.curvefit import _cholesky_inverse
 
     k = n + 1
     c = k * m
     Rn, Sn, Tn = R[:k, :k], S[:, :k, :c], T[:c, :c]
-    # scipy.linalg.solve(Rn, ., assume_a="pos") is LAPACK potrf + potrs (the same numbers); called directly,
-    # without its checks and condition estimate (a third of this function's time over 23 orders)
-    potrf, potrs = _cholesky_lapack()
-    factor, info = potrf(Rn, lower=False, clean=False)
-    if info != 0:
+    # Rn^-1 S through the inverse Cholesky factor of Rn: two matrix products (numpy.linalg, see curvefit._ls_solver)
+    factor_inverse = _cholesky_inverse(Rn)
+    if factor_inverse is None:
         raise np.linalg.LinAlgError(f"LSCF: the order-{n} basis Gram matrix is not positive definite")
-    RinvS = potrs(factor, Sn.transpose(1, 0, 2).reshape(k, -1), lower=False)[0]
+    RinvS = factor_inverse.T @ (factor_inverse @ Sn.transpose(1, 0, 2).reshape(k, -1))
     RinvS = RinvS.reshape(k, S.shape[0], c).transpose(1, 0, 2)
     M = Tn - np.einsum("oji,ojk->ik", Sn, RinvS)
     if not np.all(np.isfinite(M)):

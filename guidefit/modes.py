@@ -14,7 +14,7 @@ from guidefit import modal_base as _modal_base
 # the public names (each module's __all__) and the private ones the global fit and the tests use
 from guidefit.curvefit import (  # noqa: F401
     _basis,
-    _cholesky_lapack,
+    _cholesky_inverse,
     _covariance,
     _ls_fit,
     _ls_residual,
