@@ -225,3 +225,21 @@ def test_daq_setup_reading_one_source_twice_is_a_one_line_error(one_axis_daq, mo
     line = result.output.strip().splitlines()[-1]
     assert "runs.vertical: channels 'acc_A_y' and 'acc_A_x' both read 'Acc1'" in line
     assert "runs.vertical.channels" in line
+
+
+def test_daq_setup_listing_two_channels_of_one_source_in_a_run_is_a_one_line_error(one_axis_daq, monkeypatch):
+    """Issue 21, item 6: a run whose own channel list maps one DAQ channel to two guidefit channels
+    (acc_A_y and acc_A_x both Acc1, the first try when the sensors are turned between runs)."""
+    folder, data = one_axis_daq
+    _tdms_setup(folder, data, list_channels=True)
+    text = (folder / "test.toml").read_text()
+    vertical = next(r for r in data.runs if "acc_A_y" in r.channel_names)
+    listed = f"channels = {json.dumps(list(vertical.channel_names))}"
+    assert listed in text
+    (folder / "test.toml").write_text(
+        text.replace(listed, f"channels = {json.dumps([*vertical.channel_names, 'acc_A_x'])}", 1))
+    monkeypatch.chdir(folder)
+    result = _cli("identify", "test.toml", code=2)
+    line = result.output.strip().splitlines()[-1]
+    assert f"runs.{vertical.name}: channels 'acc_A_y' and 'acc_A_x' both read 'Acc1'" in line
+    assert "a sensor is one channel" in line
