@@ -820,6 +820,7 @@ def identify(path, guide=None, settings: IdentifySettings | None = None) -> Iden
     _quality_warnings(modes, settings, warnings)
     _excitation_warnings(modes, {r.name: r.frf for r in runs}, warnings)
     params = joint_parameters(guide.mass_kg, joint)
+    warnings.extend(consistency.unknown_hit_warnings(recording))
     gate = consistency.plausibility(modes, missing, sensors.sets, model)
     warnings.extend(consistency.mass_warnings(modes, sensors.sets, vib.carriage_mass_matrix(
         vib.model_from_guide(guide)), guide.mass_kg, model))
@@ -893,6 +894,7 @@ def _identify_global(path, source, guide, model, settings) -> Identification:
     _quality_warnings(modes, settings, warnings)
     _excitation_warnings(modes, frf_by_run, warnings)
     params = joint_parameters(guide.mass_kg, joint)
+    warnings.extend(consistency.unknown_hit_warnings(recording))
     # modes that are found but not named (ambiguous) count as missing for the gate
     not_named = [lab for lab in model.labels if lab not in {m.label for m in modes} and not lab.startswith("support")]
     gate = consistency.plausibility(modes, not_named, check.sets, model)

@@ -181,7 +181,8 @@ def frf_run(display: str, name: str, sample_rate_hz: float, excitation_direction
         text = str(exc)
         raise RecordingError(text if text.startswith(display) else f"{where}: {text}") from None
     run = Run.from_header(header, _NoSamples(display), n_samples=0, file=display)
-    return replace(run, layout="frf")
+    # without a hit point the force channel only sits at the origin: the hit point is unknown, not there
+    return replace(run, layout="frf", force_position_known=excitation_position_m is not None)
 
 
 def _known_guide(guide):
