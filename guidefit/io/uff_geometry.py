@@ -20,9 +20,9 @@ alike):
 * dataset 2420: per system a 4x3 matrix; rows 1-3 are the system's x, y, z
   axes in the global frame, row 4 its origin: ``global = M[:3].T @ local + M[3]``;
 * dataset 18: per system its origin, a point on its +x axis and a point in its
-  +xz plane, written in its reference system (``ref_cs_num``, 0 the global
-  frame); x = the direction to the x point, z = x cross (xz point - origin),
-  y = z cross x;
+  +xz plane (on the +z side), written in its reference system (``ref_cs_num``,
+  0 the global frame); x = the direction to the x point, y = (xz point -
+  origin) cross x, z = x cross y;
 * a system number that no dataset defines is the global frame when it is 0 or
   1 (the global and the default part system of I-DEAS files); any other is an
   error.
@@ -136,12 +136,12 @@ def _systems_18(dset: dict, where: str) -> list[_System]:
     for i in range(n):
         origin, xp, xzp = (p[i] for p in pts)
         x, xz = xp - origin, xzp - origin
-        z = np.cross(x, xz)
-        if not (np.linalg.norm(x) > 0 and np.linalg.norm(z) > 1e-9 * np.linalg.norm(x) * np.linalg.norm(xz)):
+        y = np.cross(xz, x)  # the normal of the xz plane, on the side that puts the xz point at +z
+        if not (np.linalg.norm(x) > 0 and np.linalg.norm(y) > 1e-9 * np.linalg.norm(x) * np.linalg.norm(xz)):
             raise RecordingError(f"{where}: coordinate system {int(labels[i])}: its origin, +x point and +xz point "
                                  "do not span a plane")
-        x, z = x / np.linalg.norm(x), z / np.linalg.norm(z)
-        m = np.vstack([x, np.cross(z, x), z, origin])
+        x, y = x / np.linalg.norm(x), y / np.linalg.norm(y)
+        m = np.vstack([x, y, np.cross(x, y), origin])
         out.append(_System(int(labels[i]), int(kinds[i]), m, int(refs[i]), where))
     return out
 
