@@ -255,3 +255,66 @@ def test_unknown_hit_point_expects_every_mode_the_sensors_see():
     unknown = ShapeSet("v", names, S, pos, dirs, empty, driving_row((0, -1, 0), None))
     assert observable_modes(model, [at_origin]) == {"vertical"}
     assert observable_modes(model, [unknown]) == set(model.labels)
+
+
+# ------------------------------------------------------------------ item 12: a machine frame (z up)
+
+MACHINE = "x=X,y=Z,z=-Y"
+
+
+def _machine_code(node: int, code: int) -> int:
+    """guidefit's direction code as the machine frame (z up) writes it."""
+    from guidefit.io.axes import parse_axis_map
+
+    if abs(code) not in (1, 2, 3):
+        return code
+    vec = parse_axis_map(MACHINE)[:, abs(code) - 1] * np.sign(code)
+    k = int(np.argmax(np.abs(vec)))
+    return int((k + 1) * np.sign(vec[k]))
+
+
+def machine_uff(src, dst):
+    """``src`` with every direction code written in the machine frame, no node coordinates."""
+    sets = pyuff.UFF(str(src)).read_sets()
+    for s in sets[1:]:
+        s["rsp_dir"] = _machine_code(s["rsp_node"], int(s["rsp_dir"]))
+        s["ref_dir"] = _machine_code(s["ref_node"], int(s["ref_dir"]))
+    pyuff.UFF(str(dst)).write_sets(sets, mode="add")
+    return dst
+
+
+def test_machine_frame_fails_with_a_hint_and_the_axis_map_gives_the_same_joint(case, tmp_path):
+    import json
+
+    path = machine_uff(case["frf_uff"], tmp_path / "machine.uff")
+    result = cli("identify", path)
+    # before: "neither the vertical nor the horizontal joint mode was found", no word about axes
+    assert result.exit_code == 1, result.output
+    assert f"try --axis-map {MACHINE}" in result.output
+    mapped = cli("identify", path, "--axis-map", MACHINE, "--json")
+    assert mapped.exit_code == 0, mapped.output
+    got = json.loads(mapped.output.strip().splitlines()[-1])
+    ref = identify(case["frf_uff"])
+    for name in ("K_V", "K_H"):
+        assert got["parameters"][name]["value"] == pytest.approx(ref.parameters[name]["value"], rel=0.01), name
+    frf = cli("frf", path, "--axis-map", MACHINE, "--out", tmp_path / "back.uff")  # written in guidefit's frame
+    assert frf.exit_code == 0, frf.output
+    assert {s["rsp_dir"] for s in pyuff.UFF(str(tmp_path / "back.uff")).read_sets()[1:]} <= {1, -1, 2, -2}
+
+
+def test_axis_map_syntax_is_export_s_and_bad_maps_are_one_line(case, tmp_path):
+    from guidefit.export import ExportError
+    from guidefit.export import parse_axis_map as export_parse
+    from guidefit.io.axes import parse_axis_map
+
+    assert np.array_equal(export_parse(MACHINE), parse_axis_map(MACHINE))
+    with pytest.raises(ExportError, match="mirror image"):
+        export_parse("x=X,y=Z,z=Y")
+    for bad, needle in (("x=X,y=Z,z=Y", "mirror image"), ("x=X,y=X,z=Z", "distinct"), ("up=Z", "x=AXIS")):
+        result = cli("identify", case["frf_uff"], "--axis-map", bad)
+        assert result.exit_code == 2 and needle in result.output, result.output
+        assert len(result.output.strip().splitlines()) == 1
+    csv = tmp_path / "rec.csv"
+    csv.write_text("# sample_rate_hz: 1000\n# excitation_direction: 0 -1 0\nforce,acc_A_y\n" + "0,0\n" * 8)
+    result = cli("frf", csv, "--axis-map", MACHINE)
+    assert result.exit_code == 2 and "a CSV, a test setup or a DAQ file" in result.output, result.output

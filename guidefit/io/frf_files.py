@@ -616,15 +616,17 @@ def read_input(path):
     >>> type(read_input(path)).__name__
     'Recording'
     """
+    from guidefit.io.axes import map_input, reading
     from guidefit.io.registry import read_recording
 
     # a recording is read at no extra cost; the content of a file no recording reader takes is looked at then
-    try:
-        return read_recording(path)
-    except RecordingError:
-        if holds_frfs(path):
-            return read_frf_file(path)
-        raise
+    with reading() as rot:  # an input axis map in force (guidefit.io.axes.input_axes): applied once, here
+        try:
+            return map_input(read_recording(path), rot, os.fspath(path))
+        except RecordingError:
+            if holds_frfs(path):
+                return map_input(read_frf_file(path), rot, os.fspath(path))
+            raise
 
 
 def read_metadata(path):

@@ -74,6 +74,7 @@ class UffGeometry:
     nodes: dict = field(default_factory=dict)
     frames: dict = field(default_factory=dict)
     display: str = ""
+    axis_map: np.ndarray | None = None  # an input axis map (guidefit.io.axes): file = R @ guidefit
 
     @property
     def rotated(self) -> bool:
@@ -88,11 +89,12 @@ class UffGeometry:
         RecordingError
             The direction, turned into the global frame, is not along X, Y or Z.
         """
+        from guidefit.io.axes import turn_code
         from guidefit.io.uff import DIRECTION_TOLERANCE, _direction_label
 
         frame = self.frames.get(int(node))
         if frame is None or abs(int(code)) not in (1, 2, 3):
-            return int(code)
+            return turn_code(code, self.axis_map)
         vec = np.sign(code) * frame[abs(int(code)) - 1]
         k = int(np.argmax(np.abs(vec)))
         if abs(vec[k]) < 1.0 - DIRECTION_TOLERANCE:
@@ -102,7 +104,7 @@ class UffGeometry:
                 f"system is ({shown}) in the global frame, not along X, Y or Z; guidefit reads sensors and "
                 "hammers along the carriage axes"
             )
-        return (k + 1) if vec[k] > 0 else -(k + 1)
+        return turn_code((k + 1) if vec[k] > 0 else -(k + 1), self.axis_map)
 
 
 def _orthonormal(rows: np.ndarray) -> bool:
@@ -217,11 +219,16 @@ def read_geometry(uff, kinds: list[int], display: str, read_set) -> UffGeometry:
         for n, dcs, pcs, x, y, z in zip(nums, *cols):
             if np.all(np.isfinite([x, y, z])):
                 raw_nodes[int(n)] = (int(dcs), int(pcs), np.array([x, y, z]))
+    from guidefit.io.axes import active
+
+    rot = active()  # an input axis map: the file's global frame into guidefit's
     nodes, frames = {}, {}
     for n, (dcs, pcs, xyz) in raw_nodes.items():
         m = _resolve(systems, dcs, display, f"node {n} (its coordinates)")
         nodes[n] = xyz if m is None else m[:3].T @ xyz + m[3]
+        if rot is not None:
+            nodes[n] = rot.T @ nodes[n]
         m = _resolve(systems, pcs, display, f"node {n} (its displacement directions)")
         if m is not None:
             frames[n] = m[:3].copy()
-    return UffGeometry(nodes, frames, display)
+    return UffGeometry(nodes, frames, display, rot)
