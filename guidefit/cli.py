@@ -161,6 +161,24 @@ def _written(path):
     return replacing(path)
 
 
+def _input_axis_map(func):
+    """``--axis-map`` of an input file (one syntax with export's): the command runs with the file's axes
+    turned into guidefit's (:func:`guidefit.io.axes.input_axes`); parsed before any work (exit 2)."""
+    import functools
+
+    @functools.wraps(func)
+    def run(*args, input_axis_map=None, **kwargs):
+        from guidefit.io.axes import input_axes, parse_axis_map
+
+        rot = parse_axis_map(input_axis_map, error=click.BadParameter)
+        with input_axes(rot):
+            return func(*args, **kwargs)
+
+    return click.option("--axis-map", "input_axis_map", metavar="x=AX,y=AX,z=AX",
+                        help="The file's axes in guidefit's (x lateral, y vertical, z along the rail), e.g. "
+                             "x=X,y=Z,z=-Y for a machine frame with Z up; for UFF, frf.h5 and recordings.")(run)
+
+
 @main.command()
 def guides():
     """List the built-in guide catalogue."""
@@ -224,6 +242,7 @@ def predict(guide_name, load_text, sweep_text, calibration, as_json, plot_path):
 @click.option("--no-search", is_flag=True, help="Skip the search for the best hit points and layout.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON document.")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), help="Write the auto-MAC matrix (PNG).")
+@_input_axis_map
 def plan_cmd(setup, guide_name, layout, hit_texts, no_search, as_json, plot_path):
     """Before the test: which modes each run excites and reads, and which labels the layout decides by shape.
 
@@ -322,6 +341,7 @@ def _candidate_names(candidates: str | None):
               help="Files processed in parallel.")
 @click.option("--no-jackknife", is_flag=True, help="Skip the hit-group jackknife (faster, fit std only).")
 @_fft_precision_option
+@_input_axis_map
 def identify_cmd(files, guide_name, estimator, as_json, csv_path, summary_path, plot_path, check_path,
                  junit_path, jobs, no_jackknife, fft_precision):
     """Identify K_V, K_H, c_V, c_H from hammer recordings (Eq. 24-29)."""
@@ -501,6 +521,7 @@ def _parse_window(text: str | None):
 @click.option("--out", "out_path", type=click.Path(dir_okay=False),
               help="frf.csv, frf.h5 or frf.uff (UFF-58, needs pyuff); default: a summary on the terminal.")
 @_fft_precision_option
+@_input_axis_map
 def frf_cmd(recording, estimator, window_text, out_path, fft_precision):
     """FRFs (H1/H2/Hv) and coherence of every response channel of any recording."""
     from guidefit import report
@@ -533,6 +554,7 @@ def frf_cmd(recording, estimator, window_text, out_path, fft_precision):
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False),
               help="PNG: measured vs model frequencies (and FRFs) before and after.")
 @_identify_options
+@_input_axis_map
 def explain_cmd(recording, modes_path, guide_name, candidates, as_json, plot_path, estimator, no_jackknife,
                 fft_precision):
     """Trace the model-measurement residual to a physical effect; error before and after."""
@@ -636,6 +658,7 @@ def export_cmd(results, fmt, joint, explain_paths, guide_name, element, units, a
 @click.option("--guide", "guide_name", help="Guide name or TOML (default: the file's guide attribute).")
 @click.option("--candidates", help="explain: comma-separated effect names to try (default: the whole library).")
 @_identify_options
+@_input_axis_map
 def report_cmd(recording, out_path, guide_name, candidates, estimator, no_jackknife, fft_precision):
     """One self-contained HTML report of the identify and explain results (the same calls, same settings)."""
     from guidefit import report

@@ -524,22 +524,41 @@ def observable_modes(model, sets: list[ShapeSet], threshold: float = 0.1) -> set
 
     A mode's visibility in a run is ``|b . phi| |S phi|`` (the size of its
     modal constants); it counts when it reaches ``threshold`` of the run's most
-    visible model mode.
+    visible model mode. A run whose hit point is unknown (``driving`` None)
+    may have excited any mode: there ``|b . phi|`` is taken as 1, so every mode
+    its sensors see is expected (an unknown hit point makes the gate stricter,
+    never blind: a hit assumed at the origin would excite only a few modes).
     """
     seen = set()
     shapes = np.asarray(model.shapes)[:5]
     labels = [lab for lab in model.labels]
     freqs = np.asarray(model.frequencies_hz)
     for s in sets:
-        if s.driving is None or not len(s.channels):
+        if not len(s.channels):
             continue
-        vis = np.abs(s.driving @ shapes) * np.linalg.norm(s.sensors @ shapes, axis=0)
+        vis = _participation(s, shapes) * np.linalg.norm(s.sensors @ shapes, axis=0)
         vis = np.where((freqs >= s.band_hz[0]) & (freqs <= s.band_hz[1]), vis, 0.0)
         top = float(vis.max())
         if top <= 0:
             continue
         seen.update(lab for lab, v in zip(labels, vis) if v >= threshold * top and not lab.startswith("support"))
     return seen
+
+
+def _participation(s: ShapeSet, shapes: np.ndarray) -> np.ndarray:
+    """``|b . phi|`` per mode at the run's hit point; ones when the hit point is unknown (any mode the
+    sensors see may have been excited: an unknown hit point makes the gate expect more, never less)."""
+    if s.driving is None:
+        return np.ones(shapes.shape[1])
+    return np.abs(s.driving @ shapes)
+
+
+def unknown_hit_warnings(recording) -> list[str]:
+    """One warning per run whose hit point the file does not give (:attr:`Run.hit_position_m` None)."""
+    return [f"run '{r.name}': the hit point is unknown (the file does not say where the hammer hit): the "
+            "plausibility gate expects every carriage mode its sensors see, and the labels do not use the "
+            "hammer's participation" for r in recording.runs
+            if r.hit_position_m is None]
 
 
 def plausibility(modes, missing, sets: list[ShapeSet], model) -> str | None:
@@ -565,7 +584,8 @@ def plausibility(modes, missing, sets: list[ShapeSet], model) -> str | None:
     observable = observable_modes(model, sets)
     lost = sorted(lab for lab in missing if lab in observable)
     if len(lost) >= 2 and 2 * len(lost) > len(observable):
-        return (f"{len(lost)} of the {len(observable)} carriage modes this set-up excites and sees are missing "
+        verb = "may excite (hit point unknown)" if any(s.driving is None for s in sets) else "excites"
+        return (f"{len(lost)} of the {len(observable)} carriage modes this set-up {verb} and sees are missing "
                 f"({', '.join(lost)}): the recording does not look like a carriage on this guide")
     misfit = rigid_misfit(sets)
     for run in dict.fromkeys(r[0] for r in misfit):
@@ -639,11 +659,12 @@ def mass_warnings(modes, sets: list[ShapeSet], mass_matrix: np.ndarray, mass_kg:
 # --------------------------------------------------------------------------- identify glue
 
 
-def driving_row(direction, position_m) -> np.ndarray:
-    """The hammer's row b (5,): its direction times the rigid-body map at the hit point (origin if unknown)."""
+def driving_row(direction, position_m) -> np.ndarray | None:
+    """The hammer's row b (5,): its direction times the rigid-body map at the hit point; None when the
+    hit point is unknown (never the origin's: a hit there excites only some modes)."""
     from guidefit.labels import driving_row as row
 
-    return row(direction, np.zeros(3) if position_m is None else position_m)
+    return row(direction, position_m)
 
 
 def sensor_rows(channels) -> np.ndarray:
@@ -738,8 +759,8 @@ class SensorCheck:
 
 
 def _hit_points(recording) -> dict:
-    return {r.name: r.excitation_position_m if r.excitation_position_m is not None else r.force_channel.position_m
-            for r in recording.runs}
+    """Run name -> hit point (m) or None when the file does not give it (:attr:`Run.hit_position_m`)."""
+    return {r.name: r.hit_position_m for r in recording.runs}
 
 
 def check_sensors(runs, modes, recording, guide, model, settings, refit) -> SensorCheck:

@@ -386,31 +386,15 @@ def unit_transform(units: str) -> np.ndarray:
 
 
 def parse_axis_map(text: str | None) -> np.ndarray:
-    """``"x=X,y=Z,z=-Y"`` -> R (3x3) with machine vector = R @ model vector; a proper rotation.
+    """``"x=X,y=Z,z=-Y"`` -> R (3x3) with machine vector = R @ model vector; a proper rotation
+    (:func:`guidefit.io.axes.parse_axis_map`, the one parser of every ``--axis-map``).
 
     >>> parse_axis_map("x=X,y=Z,z=-Y") @ [0.0, 1.0, 0.0]   # model vertical is machine +Z
     array([0., 0., 1.])
     """
-    if text is None or not text.strip():
-        return np.eye(3)
-    rot = np.zeros((3, 3))
-    seen = set()
-    for item in text.split(","):
-        key, eq, target = (s.strip() for s in item.partition("="))
-        key, target_up = key.lower(), target.upper()
-        sign = -1.0 if target_up.startswith("-") else 1.0
-        axis = target_up.lstrip("+-")
-        if not eq or key not in ("x", "y", "z") or axis not in ("X", "Y", "Z") or len(target_up.lstrip("+-")) != 1 \
-                or len(target_up) - len(axis) > 1 or key in seen:
-            raise ExportError(f"--axis-map: '{_safe(item, 40)}': use x=AXIS,y=AXIS,z=AXIS with AXIS one of "
-                              "X, Y, Z, -X, -Y, -Z (e.g. x=X,y=Z,z=-Y)")
-        seen.add(key)
-        rot["XYZ".index(axis), "xyz".index(key)] = sign
-    if len(seen) != 3 or not np.allclose(rot @ rot.T, np.eye(3)):
-        raise ExportError(f"--axis-map '{_safe(text, 40)}': give each of x, y, z exactly one distinct machine axis")
-    if np.linalg.det(rot) < 0:
-        raise ExportError(f"--axis-map '{_safe(text, 40)}' is a mirror image (left-handed); flip the sign of one axis")
-    return rot
+    from guidefit.io.axes import parse_axis_map as parse
+
+    return parse(text, error=ExportError)
 
 
 def transform(matrix: np.ndarray, rot: np.ndarray, factors: np.ndarray) -> np.ndarray:

@@ -773,6 +773,7 @@ def identify(path, guide=None, settings: IdentifySettings | None = None) -> Iden
     IdentificationError
         Valid file, but no result can be trusted: every hit rejected, no joint mode found (exit 1).
     """
+    from guidefit.io.axes import frame_hint
     from guidefit.io.frf_files import FrfFile, read_input
     from guidefit.model import vibration as vib
     from guidefit.model.guides import Guide, load_guide
@@ -816,14 +817,16 @@ def identify(path, guide=None, settings: IdentifySettings | None = None) -> Iden
     if joint["V"] is None and joint["H"] is None:
         why = [w for w in warnings if " hit " not in w.split(":", 1)[0]]  # run-level reasons, not each hit
         raise IdentificationError(f"{path}: neither the vertical nor the horizontal joint mode was found"
-                                  + (f" ({'; '.join(why)})" if why else ""))
+                                  + (f" ({'; '.join(why)})" if why else "") + frame_hint(recording))
     _quality_warnings(modes, settings, warnings)
     _excitation_warnings(modes, {r.name: r.frf for r in runs}, warnings)
     params = joint_parameters(guide.mass_kg, joint)
+    warnings.extend(consistency.unknown_hit_warnings(recording))
     gate = consistency.plausibility(modes, missing, sensors.sets, model)
     warnings.extend(consistency.mass_warnings(modes, sensors.sets, vib.carriage_mass_matrix(
         vib.model_from_guide(guide)), guide.mass_kg, model))
     if gate is not None:
+        gate += frame_hint(recording)
         params = joint_parameters(guide.mass_kg, {})
     return Identification(str(path), guide, tuple(runs), tuple(modes), params, tuple(warnings),
                           tuple(extras), tuple(missing), tuple(failed_rows), hits_checked=not from_frfs,
@@ -840,6 +843,7 @@ def _identify_global(path, source, guide, model, settings) -> Identification:
     then withholds K and c when the modes are not those of a carriage on this guide.
     """
     from guidefit import consistency
+    from guidefit.io.axes import frame_hint
     from guidefit.io.frf_files import FrfFile
 
     warnings: list[str] = []
@@ -888,11 +892,12 @@ def _identify_global(path, source, guide, model, settings) -> Identification:
     if neither and (res is None or not (res.modes or res.extras)):
         why = [w for w in warnings if " hit " not in w.split(":", 1)[0]]
         raise IdentificationError(f"{path}: neither the vertical nor the horizontal joint mode was found"
-                                  + (f" ({'; '.join(why)})" if why else ""))
+                                  + (f" ({'; '.join(why)})" if why else "") + frame_hint(recording))
     frf_by_run = {r.name: r.frf for r in runs}
     _quality_warnings(modes, settings, warnings)
     _excitation_warnings(modes, frf_by_run, warnings)
     params = joint_parameters(guide.mass_kg, joint)
+    warnings.extend(consistency.unknown_hit_warnings(recording))
     # modes that are found but not named (ambiguous) count as missing for the gate
     not_named = [lab for lab in model.labels if lab not in {m.label for m in modes} and not lab.startswith("support")]
     gate = consistency.plausibility(modes, not_named, check.sets, model)
@@ -902,6 +907,7 @@ def _identify_global(path, source, guide, model, settings) -> Identification:
                 "this guide, or its sensors cannot tell its modes apart (guidefit plan shows what they can)")
     warnings.extend(consistency.global_mass_warnings(runs, check.sets, guide, model))
     if gate is not None:
+        gate += frame_hint(recording)
         params = joint_parameters(guide.mass_kg, {})
     return Identification(str(path), guide, tuple(runs), tuple(modes), params, tuple(warnings),
                           tuple(res.extras), tuple(res.missing), tuple(failed_rows), hits_checked=not from_frfs,

@@ -181,7 +181,8 @@ def frf_run(display: str, name: str, sample_rate_hz: float, excitation_direction
         text = str(exc)
         raise RecordingError(text if text.startswith(display) else f"{where}: {text}") from None
     run = Run.from_header(header, _NoSamples(display), n_samples=0, file=display)
-    return replace(run, layout="frf")
+    # without a hit point the force channel only sits at the origin: the hit point is unknown, not there
+    return replace(run, layout="frf", force_position_known=excitation_position_m is not None)
 
 
 def _known_guide(guide):
@@ -615,15 +616,17 @@ def read_input(path):
     >>> type(read_input(path)).__name__
     'Recording'
     """
+    from guidefit.io.axes import map_input, reading
     from guidefit.io.registry import read_recording
 
     # a recording is read at no extra cost; the content of a file no recording reader takes is looked at then
-    try:
-        return read_recording(path)
-    except RecordingError:
-        if holds_frfs(path):
-            return read_frf_file(path)
-        raise
+    with reading() as rot:  # an input axis map in force (guidefit.io.axes.input_axes): applied once, here
+        try:
+            return map_input(read_recording(path), rot, os.fspath(path))
+        except RecordingError:
+            if holds_frfs(path):
+                return map_input(read_frf_file(path), rot, os.fspath(path))
+            raise
 
 
 def read_metadata(path):

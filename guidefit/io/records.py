@@ -201,6 +201,12 @@ class Run:
         Column of the force channel.
     file : str
         The recording's path as given to :func:`read_recording` (for messages).
+    force_position_known : bool
+        Whether the force channel's position is the hit point (the contract's
+        meaning, True); False when the reader had no position for the hammer
+        and only placed the force channel somewhere (a UFF file without
+        coordinates of the reference node): the hit point is then unknown
+        (:attr:`hit_position_m` None).
     """
 
     name: str
@@ -215,6 +221,7 @@ class Run:
     source: object = field(repr=False)
     force_index: int
     file: str = ""
+    force_position_known: bool = True
 
     @classmethod
     def from_header(
@@ -299,6 +306,24 @@ class Run:
     def channel_names(self) -> tuple[str, ...]:
         """Channel names in column order."""
         return tuple(ch.name for ch in self.channels)
+
+    @property
+    def hit_position_m(self) -> np.ndarray | None:
+        """The hit point, m, where the file gives it: ``excitation_position_m``, else the force
+        channel's position unless :attr:`force_position_known` is False; None when unknown.
+
+        Examples
+        --------
+        >>> header = RunData("vertical", 1000.0, [0, -1, 0], ["force", "acc_A_y"], ["N", "g"],
+        ...                  [[0.01, 0, 0.02], [0.03, 0, 0.045]], [[0, -1, 0], [0, 1, 0]])
+        >>> run = Run.from_header(header, ArraySource(np.zeros((2, 2))), n_samples=2)
+        >>> from dataclasses import replace
+        >>> run.hit_position_m.tolist(), replace(run, force_position_known=False).hit_position_m
+        ([0.01, 0.0, 0.02], None)
+        """
+        if self.excitation_position_m is not None:
+            return self.excitation_position_m
+        return self.force_channel.position_m if self.force_position_known else None
 
     @property
     def force_channel(self) -> Channel:

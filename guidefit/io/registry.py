@@ -208,10 +208,13 @@ def read_recording(path):
     >>> block.round(6).tolist()  # the acceleration was stored in g
     [[2.0, 29.41995], [4.0, 49.03325]]
     """
+    from guidefit.io.axes import map_input, reading
+
     display = os.fspath(path)
     fmt = format_for(display, "recording", "read")
     p = _checked_input(display, "recording")
-    return fmt.read(p, display)
+    with reading() as rot:  # an input axis map in force (guidefit.io.axes.input_axes): applied once, here
+        return map_input(fmt.read(p, display), rot, display)
 
 
 def write_recording(path, recording, *, compression: str | None = None) -> None:

@@ -66,10 +66,14 @@ must be an acceleration (type 12) and becomes ``acc_<point>_<axis>``: point
 A-D for nodes 1-4, ``N<node>`` otherwise (``acc_N12_z``), the axis from the
 direction code. A file written by guidefit (ID line 5 starts with
 ``guidefit``) keeps its run and channel names, its exact sample rate and its
-guide. Positions, which UFF-58 does not carry: the guide's default point for
-A-D (:func:`guidefit.io.geometry.default_points`; MRB35 when the file names no
-guide), the origin for any other point and for the force; the excitation
-position is unknown (None). Sample rate: the reciprocal of the abscissa
+guide. Positions, which UFF-58 does not carry: a node's coordinates from a
+dataset 15 or 2411 in the file, else the guide's default point for A-D
+(:func:`guidefit.io.geometry.default_points`; MRB35 when the file names no
+guide), else the origin. The hit point: the reference node's coordinates, else
+unknown (``excitation_position_m`` None and ``force_position_known`` False:
+the force channel only sits at the origin). Directions: each node's
+displacement coordinate system (datasets 18, 2420) turns its direction codes
+into the global frame (:mod:`guidefit.io.uff_geometry`). Sample rate: the reciprocal of the abscissa
 increment, or the whole number of Hz whose reciprocal the 6-digit increment
 shows (51200 for ``1.95312e-05``), or guidefit's exact rate. Layout
 ``signals``: one continuous record per run, in which :mod:`guidefit.hits`
@@ -97,6 +101,7 @@ import contextlib
 import os
 import re
 from collections.abc import Iterable
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -761,8 +766,20 @@ def open_uff(display: str):
     return uff, kinds
 
 
-def _sets_of(display: str) -> list[tuple[int, dict]]:
-    """The time datasets of a UFF file as (1-based set number, dataset dict)."""
+NOTE_FRAMES = ("directions turned from the nodes' displacement coordinate systems (datasets 18, 2420) into the "
+               "global frame")
+
+
+def to_global(records: list[dict], geometry, display: str) -> None:
+    """Turn each record's response and reference direction codes into the global frame (in place)."""
+    for r in records:
+        where = f"{display}: set {r['set']}"
+        r["rsp"] = (r["rsp"][0], geometry.global_code(r["rsp"][0], r["rsp"][1], where))
+        r["ref"] = (r["ref"][0], geometry.global_code(r["ref"][0], r["ref"][1], where))
+
+
+def _sets_of(display: str):
+    """The time datasets of a UFF file as (1-based set number, dataset dict), and its geometry."""
     uff, kinds = open_uff(display)
     if not kinds:
         raise RecordingError(
@@ -788,7 +805,10 @@ def _sets_of(display: str) -> list[tuple[int, dict]]:
             f"{_describe(kinds, functions)}. guidefit reads UFF-58 time records as a recording "
             "(identify, explain and report also take FRFs: function type 4)"
         )
-    return [(i, _read_set(uff, i, 58, display)) for i in time_sets]
+    from guidefit.io.uff_geometry import read_geometry
+
+    geometry = read_geometry(uff, kinds, display, _read_set)
+    return [(i, _read_set(uff, i, 58, display)) for i in time_sets], geometry
 
 
 def _check_units(dset: dict, i: int, display: str) -> None:
@@ -970,7 +990,8 @@ def _names(run: dict) -> tuple[str | None, list[str]]:
         return None, derived
     names = [r["id1"] for r in members]
     ok = all(
-        (name == "force") == (r is run["force"]) and (name == "force" or _ACC_RE.match(name))
+        (name == "force") == (r is run["force"])
+        and (name == "force" or (_ACC_RE.match(name) and name[-1] == _derived_channel(r)[-1]))
         for name, r in zip(names, members)
     )
     if not ok or len(set(names)) != len(names):
@@ -1017,7 +1038,9 @@ def read_uff_recording(path) -> Recording:
         raise RecordingError(f"{display}: is a directory; expected a UFF file")
     if p.stat().st_size == 0:
         raise RecordingError(f"{display}: file is empty")
-    records = [_record(i, dset, display) for i, dset in _sets_of(display)]
+    sets, geometry = _sets_of(display)
+    records = [_record(i, dset, display) for i, dset in sets]
+    to_global(records, geometry, display)
     groups = _group_runs(records, display)
     guide = next((r["provenance"].get("guide") for r in records if r["provenance"]), None)
     points = _default_points(guide)
@@ -1036,15 +1059,17 @@ def read_uff_recording(path) -> Recording:
         where = f"{display}: run '{name}' (set {members[0]['set']}...)"
         excitation = direction_vector(run["code"])
         units, positions, directions = [], [], []
+        hit = geometry.nodes.get(ref[0])
         for channel, r in zip(channel_names, members):
             if r is force:
                 units.append(_unit(r, True, display))
-                positions.append(np.zeros(3))
+                positions.append(np.zeros(3) if hit is None else hit)
                 directions.append(excitation)
             else:
                 units.append(_unit(r, False, display))
                 point = _ACC_RE.match(channel).group(1)
-                positions.append(points.get(point, np.zeros(3)))
+                node_xyz = geometry.nodes.get(r["rsp"][0])
+                positions.append(node_xyz if node_xyz is not None else points.get(point, np.zeros(3)))
                 directions.append(direction_vector(r["rsp"][1]))
         data = np.ascontiguousarray(np.column_stack([r["data"] for r in members]))
         data.setflags(write=False)
@@ -1061,12 +1086,14 @@ def read_uff_recording(path) -> Recording:
                 directions,
                 data=data,
                 layout="signals",
+                excitation_position_m=hit,
             )
         except RecordingError as exc:
             raise RecordingError(f"{where}: {exc}") from None
-        # in memory, as for CSV recordings
+        # in memory, as for CSV recordings; without the reference node's coordinates the hit point is unknown
         source = ArraySource(data)
-        runs.append(Run.from_header(checked, source, n_samples=int(data.shape[0]), file=display))
+        run = Run.from_header(checked, source, n_samples=int(data.shape[0]), file=display)
+        runs.append(replace(run, force_position_known=hit is not None))
     return Recording(path=display, guide=guide, description="", runs=tuple(runs))
 
 

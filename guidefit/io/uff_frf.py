@@ -16,7 +16,14 @@ the way :func:`guidefit.io.uff.read_uff_recording` maps time data:
   direction code; a guidefit file keeps its channel names (ID line 1
   ``H1 acc_A_y/force``). Positions: node coordinates from a dataset 15 or
   2411 in the file where present, else the guide's default point for A-D
-  and the origin otherwise (said in the notes).
+  and the origin otherwise (said in the notes). Directions: a node's
+  displacement coordinate system (datasets 18, 2420) is applied, so the axis
+  is the global one (:mod:`guidefit.io.uff_geometry`; a direction that is
+  not along a global axis is refused).
+* **Hit point**: the reference node's coordinates where the file gives them;
+  else unknown (never the origin): identify warns, the plausibility gate
+  expects every mode the sensors see, and the labels do without the
+  hammer's participation.
 * **Coherence**: the type 6 record at the same response and reference DOF,
   if any; without one the coherence is NaN (no coherence check).
 * **Accelerance**: ordinate acceleration (12) over excitation force (13).
@@ -61,6 +68,7 @@ from guidefit.io.uff import (
     FUNCTION_COHERENCE,
     FUNCTION_FRF,
     FUNCTION_TIME,
+    NOTE_FRAMES,
     SPEC_ACCELERATION,
     SPEC_FORCE,
     SPEC_FREQUENCY,
@@ -76,7 +84,9 @@ from guidefit.io.uff import (
     _read_set,
     direction_vector,
     open_uff,
+    to_global,
 )
+from guidefit.io.uff_geometry import UffGeometry, read_geometry
 
 __all__ = ["read_uff_frfs"]
 
@@ -165,28 +175,17 @@ def _coherence_record(i: int, dset: dict, display: str) -> dict:
             "ref": (int(dset.get("ref_node", 0)), int(dset.get("ref_dir", 0)))}
 
 
-def _nodes(dset: dict) -> dict[int, np.ndarray]:
-    """Node coordinates of a dataset 15 or 2411 (m: the file's units are checked to be SI)."""
-    nums = np.asarray(dset.get("node_nums", []), dtype=float).reshape(-1)
-    xyz = [np.asarray(dset.get(k, []), dtype=float).reshape(-1) for k in ("x", "y", "z")]
-    if not all(c.size == nums.size for c in xyz):
-        return {}
-    return {int(n): np.array([x, y, z]) for n, x, y, z in zip(nums, *xyz) if np.all(np.isfinite([x, y, z]))}
-
-
-def _scan(display: str) -> tuple[list, list, dict]:
-    """(FRF records, coherence records, node coordinates) of a UFF file."""
+def _scan(display: str) -> tuple[list, list, UffGeometry]:
+    """(FRF records, coherence records, geometry) of a UFF file; directions in the global frame."""
     uff, kinds = open_uff(display)
     if not kinds:
         raise RecordingError(f"{display}: no UFF datasets (blocks between '    -1' lines); expected UFF-58 FRFs")
     if _count_delimiters(Path(display).read_bytes()) % 2:
         raise RecordingError(f"{display}: set {len(kinds) + 1} is truncated (no closing '    -1' line)")
-    frfs, cohs, nodes, functions = [], [], {}, []
+    frfs, cohs, functions = [], [], []
     for i, kind in enumerate(kinds, start=1):
         if kind == 164:
             _check_units(_read_set(uff, i, kind, display), i, display)
-        elif kind in (15, 2411):
-            nodes.update(_nodes(_read_set(uff, i, kind, display)))
         elif kind == 58:
             head = _read_set(uff, i, kind, display, header_only=True)
             functions.append(int(head.get("func_type", -1)))
@@ -198,7 +197,9 @@ def _scan(display: str) -> tuple[list, list, dict]:
         raise RecordingError(f"{display}: holds time data (function type 1); it is read as a recording")
     if not frfs:
         raise RecordingError(f"{display}: no FRFs (dataset 58, function type 4); found {_describe(kinds, functions)}")
-    return frfs, cohs, nodes
+    geometry = read_geometry(uff, kinds, display, _read_set)
+    to_global(frfs + cohs, geometry, display)
+    return frfs, cohs, geometry
 
 
 def _same_axis(a: np.ndarray, b: np.ndarray) -> bool:
@@ -222,9 +223,10 @@ def _exact_axis(f: np.ndarray, rate: str | None) -> np.ndarray:
 
 def _channel_name(record: dict) -> str:
     id1 = record["id1"].split()
-    if record["provenance"] and len(id1) == 2 and id1[1].endswith("/force"):
-        return id1[1][: -len("/force")]
-    return _derived_channel(record)
+    derived = _derived_channel(record)
+    if record["provenance"] and len(id1) == 2 and id1[1].endswith("/force") and id1[1][-7] == derived[-1]:
+        return id1[1][: -len("/force")]  # guidefit's name, its axis that of the (global) direction
+    return derived
 
 
 def _group(frfs: list, display: str) -> list[dict]:
@@ -301,10 +303,13 @@ def read_uff_frfs(p: Path, display: str) -> FrfFile:
     """
     from guidefit.io.records import Recording
 
-    frfs, cohs, nodes = _scan(display)
+    frfs, cohs, geometry = _scan(display)
+    nodes = geometry.nodes
     guide = next((r["windows"].get("guide") for r in frfs if r["windows"].get("guide")), None)
     points = _default_points(guide)
     notes: list[str] = [NOTE_NO_HITS]
+    if geometry.rotated:
+        notes.append(NOTE_FRAMES)
     frfsets, runs, used = [], [], set()
     for g in _group(frfs, display):
         members = g["members"]
