@@ -568,3 +568,23 @@ def test_sdypy_ema_reads_the_frf_file(sample_frf_uff):
     model.select_closest_poles([3500.0])
     # the nominal MRB35 vertical mode (sample_data/README.md: truth 3529.03 Hz)
     assert model.nat_freq[0] == pytest.approx(3529.03, rel=1e-3)
+
+
+def test_convert_refuses_uff_time_data_whose_hit_point_is_unknown(simulated, tmp_path):
+    """Without the reference node's coordinates the hit point is unknown; a recording written from it
+    would state the force channel's position as the hit (read back as known): refused in one line."""
+    import pyuff
+
+    from guidefit.cli import main
+
+    _, _, uff_path = simulated
+    sets = [s for s in pyuff.UFF(str(uff_path)).read_sets() if s["type"] not in (15, 2411)]
+    bare = tmp_path / "bare.uff"
+    pyuff.UFF(str(bare)).write_sets(sets, mode="add")
+    assert read_recording(bare).runs[0].hit_position_m is None
+    out = tmp_path / "bare.h5"
+    result = CliRunner().invoke(main, ["convert", str(bare), "-o", str(out)])
+    assert result.exit_code == 2, result.output
+    line = result.output.strip().splitlines()[-1]
+    assert "the hit point is unknown" in line and "excitation_position_m" in line
+    assert not out.exists()

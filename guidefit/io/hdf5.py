@@ -675,6 +675,13 @@ def write_hdf5(path, recording, *, compression: str | None = None) -> None:
         raise TypeError(
             f"recording: expected RecordingData, RunData or Recording, got {type(recording).__name__}"
         )
+    for run in recording.runs:
+        if getattr(run, "hit_position_m", ()) is None:  # a Run read from a file that does not say where
+            raise RecordingError(
+                f"{display}: run '{run.name}': the hit point is unknown (the source file gives no coordinates "
+                "for the reference node); a recording would put it at the force channel's position. Give it: "
+                "a test setup with excitation_position_m (docs/recordings.md), or the node's coordinates in the file"
+            )
     _atomic(Path(display), lambda tmp: _write_hdf5(tmp, display, recording, compression))
 
 
