@@ -526,6 +526,11 @@ def _measure_mode(bins, mode, notes: list) -> list:
     weights = np.array([abs(mode.shape.get(n, 0.0)) for n in names]) ** 2
     out = []
     for run, rr, wanted, forces, whole in bins:
+        hit = run.hit_position_m  # the contract's hit point: excitation_position_m, else the force channel's
+        if hit is None:
+            notes.append(f"force level of run '{run.name}' at {np.mean(forces):.0f} N: the hit point is unknown; "
+                         "the forward model of the level needs it")
+            continue
         try:
             frf, pulse, (n_samples, pretrigger) = _bin_frf(run, rr, wanted, whole)
             fit, band = level_estimate(frf, mode.frequency_hz, mode.damping_ratio, weights, jackknife=True)
@@ -538,8 +543,7 @@ def _measure_mode(bins, mode, notes: list) -> list:
             pretrigger_samples=int(pretrigger), channel_names=tuple(frf.channels),
             positions_m=np.array([ch.position_m for ch in channels], float),
             directions=np.array([ch.direction for ch in channels], float),
-            hit_position_m=tuple(float(x) for x in (run.excitation_position_m
-                                                    if run.excitation_position_m is not None else (0, 0, 0))),
+            hit_position_m=tuple(float(x) for x in hit),
             hit_direction=tuple(float(x) for x in run.excitation_direction), pulse_s=pulse,
             force_window_s=frf.force_window_s, exp_tau_s=frf.exp_window_tau_s, estimator=frf.estimator)
         out.append(MeasuredLevel(run.name, mode.label, tuple(float(x) for x in np.sort(forces)),

@@ -694,7 +694,7 @@ def frf_overlay(identification, explanation) -> dict:
     k = int(np.argmax(np.max(np.abs(frf.H), axis=0)))
     ch = run.channels[k]
     rec_run = read_metadata(ident.file).run(run.name)  # metadata only (recording or FRF file): the hit point
-    hit = rec_run.excitation_position_m if rec_run.excitation_position_m is not None else np.zeros(3)
+    hit = rec_run.hit_position_m  # excitation_position_m, else the force channel's; None: unknown
     zeta = {}
     for m in ident.modes:
         if getattr(m, "level", None) is None:
@@ -711,8 +711,11 @@ def frf_overlay(identification, explanation) -> dict:
                                [ch.direction])[:, 0]
 
     out = {"frequency_hz": f[band], "measured": frf.H[band, k],
-           "before": model(vib.model_from_guide(ident.guide)),
            "title": f"run '{run.name}', {ch.name} (identified damping)"}
+    if hit is None:  # no model FRF without the hit point: the measured one alone, and why
+        out["title"] += "; no model curve: the hit point is unknown"
+        return out
+    out["before"] = model(vib.model_from_guide(ident.guide))
     if explanation.verdict == "explained":
         out["after"] = model(fitted_spec(explanation, ident.guide))
     return out
