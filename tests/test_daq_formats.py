@@ -342,7 +342,41 @@ def test_text_time_column_written_with_few_digits(tmp_path):
     assert daq.rate_for(daq.channels) == pytest.approx(fs, rel=1e-7)
     (tmp_path / "x.csv").write_text("Time [s];Hammer;A_Y\n" + "\n".join(rows[:10000] + rows[10001:]) + "\n")
     daq = open_daq(tmp_path / "x.csv", "x.csv", RunOptions("t.toml: runs.a"))
-    with pytest.raises(ValueError, match=r"x.csv: time column 'Time': spacing not uniform"):
+    with pytest.raises(ValueError, match=r"x.csv: time column 'Time': times jump by 4e-05 s, from 0.19529 s to "
+                                         r"0.19533 s between samples 10000 and 10001"):
+        daq.rate_for(daq.channels)
+
+
+def _g_time_export(path, gap_at=None, gap_s=0.04, fs=51200.0, last_s=0.5):
+    """A text export whose time column is written ``%g`` (6 significant digits, trailing zeros
+    dropped: the last row is ``0.5``), with a gap of ``gap_s`` after sample ``gap_at``."""
+    n = int(round(last_s * fs)) + 1
+    k = np.arange(n)
+    if gap_at is not None:
+        k = k[: n - int(round(gap_s * fs))]
+        k[gap_at:] += int(round(gap_s * fs))
+    t = k / fs
+    path.write_text("Time;Hammer\n" + "".join(f"{a:g};{np.sin(a * 1e3):.6f}\n" for a in t))
+    return t
+
+
+def test_text_time_column_written_g_with_a_gap_is_refused(tmp_path):
+    """``%g`` times: each row's own printed step bounds its rounding (``0.5`` 0.1 s, ``0.234355`` 1e-6 s).
+    Before, the last row's step alone (0.1 s, 2560 periods) let a 40 ms gap through: 45294 Hz for
+    51200 (K -13.5 % in the issue's case), exit 0."""
+    from guidefit.io._daq import RunOptions
+    from guidefit.io.text import open_daq
+
+    t = _g_time_export(tmp_path / "x.csv")
+    assert (tmp_path / "x.csv").read_text().endswith("\n0.5;-0.467772\n")
+    daq = open_daq(tmp_path / "x.csv", "x.csv", RunOptions("t.toml: runs.a"))
+    # the times are off by up to half a microsecond over half a second
+    assert daq.rate_for(daq.channels) == pytest.approx(51200.0, rel=2e-6)
+    assert daq.count_rows(daq.channels) == t.size
+    _g_time_export(tmp_path / "x.csv", gap_at=12000)
+    daq = open_daq(tmp_path / "x.csv", "x.csv", RunOptions("t.toml: runs.a"))
+    with pytest.raises(ValueError, match=r"^x.csv: time column 'Time': times jump by 0.04002 s, from 0.234355 s to "
+                                         r"0.274375 s between samples 12000 and 12001; expected equally spaced"):
         daq.rate_for(daq.channels)
 
 

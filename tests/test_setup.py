@@ -342,6 +342,23 @@ def test_text_without_time_needs_sample_rate(folder):
     np.testing.assert_allclose(run.read_block(5, 6)[0, 1], x[5, 2] * 1000 / 10.2 * 9.80665, rtol=1e-8)
 
 
+def test_text_time_column_with_a_gap_is_exit_2_and_one_line(folder):
+    """Times written ``%g`` (the last row ``0.1``) with a 20 ms gap: refused in one line that says
+    where, exit 2 (before: the last row's step, 0.1 s, let it through with a rate 11 % off, exit 0)."""
+    k = np.arange(int(0.1 * RATE) + 1 - 1024)
+    k[2000:] += 1024
+    t = k / RATE
+    rows = [f"{a:g};{np.sin(3e3 * a):.6f};{np.cos(3e3 * a):.6f};{0.5 * np.sin(5e3 * a):.6f}" for a in t]
+    assert rows[-1].startswith("0.1;")
+    (folder / "vertical.csv").write_text("Time;Hammer;AccA_Y;AccB_Y\n" + "\n".join(rows) + "\n")
+    (folder / "test.toml").write_text(GOOD.replace("vertical.tdms", "vertical.csv").split("[runs.lateral]")[0])
+    result = CliRunner().invoke(main, ["identify", "test.toml"])
+    lines = _lines(result)
+    assert result.exit_code == 2 and len(lines) == 1, lines
+    assert ("vertical.csv: time column 'Time': times jump by 0.0200195 s, from 0.039043 s to 0.0590625 s "
+            "between samples 2000 and 2001") in lines[0]
+
+
 def test_mat_wide_array_is_explained(folder):
     import scipy.io
 
