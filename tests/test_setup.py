@@ -371,6 +371,28 @@ def test_mat_wide_array_is_explained(folder):
         read_recording("test.toml")
 
 
+@pytest.mark.parametrize("n_time", [1000, 4096])
+def test_mat_time_vector_of_another_length_is_exit_2_and_one_line(folder, n_time):
+    """``savemat(f, {"data": n x 3, "t": 1000 times})``: the rate of a time vector that is not the
+    channels' is not theirs (before: used, K_V -9.8 % / +21 % with exit 0)."""
+    import scipy.io
+
+    t = np.arange(N) / RATE
+    data = np.column_stack([np.exp(-((t - 0.005) / 1e-4) ** 2), np.sin(2e3 * t), np.cos(2e3 * t)])
+    scipy.io.savemat(folder / "vertical.mat", {"data": data, "t": np.arange(n_time) / 19000.0,
+                                               "unused": np.zeros((2, 3, 4))})
+    text = GOOD.replace("vertical.tdms", "vertical.mat").split("[runs.lateral]")[0]
+    text = text.replace('"Hammer"', '"data:0"').replace('"AccA_Y"', '"data:1"').replace('"AccB_Y"', '"data:2"')
+    (folder / "test.toml").write_text(text)
+    result = CliRunner().invoke(main, ["identify", "test.toml"])
+    lines = _lines(result)
+    assert result.exit_code == 2 and len(lines) == 1, lines
+    assert f"vertical.mat: time variable 't' holds {n_time} times but channel 'data:0' {N} samples" in lines[0]
+    scipy.io.savemat(folder / "vertical.mat", {"data": data, "t": t, "unused": np.zeros((2, 3, 4))})
+    run = read_recording("test.toml").runs[0]  # the 3-D variable no channel names is not read
+    assert run.sample_rate_hz == pytest.approx(RATE, rel=1e-12) and run.n_samples == N
+
+
 @pytest.fixture(scope="module")
 def simulated_setup(tmp_path_factory):
     """A simulated vertical run in volts as a European text export with its setup, and the contract file."""
