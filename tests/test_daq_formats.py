@@ -489,3 +489,23 @@ def test_mat_variable_of_three_dimensions(tmp_path, version, group):
     _write_mat(tmp_path / "x.mat", version, {"data": data, "t": np.zeros((300, 2, 2))}, group)
     with pytest.raises(ValueError, match=r"^x.mat: time variable 't' is 300 x 2 x 2; expected a vector$"):
         open_daq(tmp_path / "x.mat", "x.mat", RunOptions("t.toml: runs.a", group=group))
+
+
+@pytest.mark.parametrize("version", ["v5", "v73"])
+@pytest.mark.parametrize("variables, message", [
+    ({"fs": 1900.0, "Fs": 1000.0}, r"variable 'fs' says 1900 Hz but variable 'Fs' 1000 Hz"),
+    ({"Fs": 1900.0, "t": np.arange(300) / 1000.0}, r"time variable 't' gives 1000 Hz but variable 'Fs' says 1900 Hz"),
+    ({"t": np.arange(300) / 1900.0, "time": np.arange(299) / 1900.0},
+     r"time variables 't' \(300 times\) and 'time' \(299\) differ in length"),
+    ({"t": np.arange(300) / 1900.0, "time": np.arange(300) / 1000.0},
+     r"time variable 'time' gives 1000 Hz but time variable 't' says 1900 Hz"),
+], ids=["fs-Fs", "Fs-t", "t-time-length", "t-time-rate"])
+def test_mat_every_rate_and_time_variable_must_agree(tmp_path, version, variables, message):
+    """Each way a .mat file states its rate is checked, not only the first found (before: ``Fs``
+    beside a disagreeing ``fs``, or ``time`` beside ``t``, was ignored)."""
+    from guidefit.io._daq import RunOptions
+    from guidefit.io.mat import open_daq
+
+    _write_mat(tmp_path / "x.mat", version, {"data": np.ones((300, 2)), **variables})
+    with pytest.raises(ValueError, match="^x.mat: " + message):
+        open_daq(tmp_path / "x.mat", "x.mat", RunOptions("t.toml: runs.a"))

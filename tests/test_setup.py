@@ -393,6 +393,23 @@ def test_mat_time_vector_of_another_length_is_exit_2_and_one_line(folder, n_time
     assert run.sample_rate_hz == pytest.approx(RATE, rel=1e-12) and run.n_samples == N
 
 
+def test_mat_complex_channels_are_exit_2_and_one_line(folder):
+    """A v5 variable of complex numbers (whosmat calls it 'double'): refused where it is read,
+    not cast to its real part with a numpy warning."""
+    import scipy.io
+
+    t = np.arange(N) / RATE
+    data = np.column_stack([np.exp(-((t - 0.005) / 1e-4) ** 2), np.sin(2e3 * t), np.cos(2e3 * t)])
+    scipy.io.savemat(folder / "vertical.mat", {"data": data * (1 + 0.5j), "fs": RATE})
+    text = GOOD.replace("vertical.tdms", "vertical.mat").split("[runs.lateral]")[0]
+    text = text.replace('"Hammer"', '"data:0"').replace('"AccA_Y"', '"data:1"').replace('"AccB_Y"', '"data:2"')
+    (folder / "test.toml").write_text(text)
+    result = CliRunner().invoke(main, ["identify", "test.toml"])
+    lines = _lines(result)
+    assert result.exit_code == 2 and len(lines) == 1, lines
+    assert "vertical.mat: variable 'data' holds complex128 numbers; expected real samples" in lines[0]
+
+
 @pytest.fixture(scope="module")
 def simulated_setup(tmp_path_factory):
     """A simulated vertical run in volts as a European text export with its setup, and the contract file."""

@@ -80,6 +80,10 @@ class MatSource(ColumnSource):
 
     def _read(self, handle, start, stop, keys):
         arrays = self._arrays()
+        for name, _ in keys:
+            if np.asarray(arrays[name]).dtype.kind not in "fiu":  # whosmat calls complex arrays 'double'
+                raise RecordingError(f"{self.facts.get('display', self.facts['path'])}: variable '{name}' holds "
+                                     f"{np.asarray(arrays[name]).dtype.name} numbers; expected real samples")
         return [_v5_column(arrays[name], col)[start:stop] for name, col in keys]
 
 
@@ -261,16 +265,42 @@ def _channels(variables: dict, key_of) -> tuple[list, dict, dict]:
 
 
 def _scalar_rate(variables: dict, display: str) -> tuple[float | None, str]:
+    """The rate of the variables ``fs``, ``Fs``, ``sample_rate_hz`` (all that exist must agree)."""
+    rate, origin = None, ""
     for name in RATE_NAMES:
         if name in variables:
             shape, _, *rest = variables[name]
             value = rest[-1]
             if isinstance(value, np.ndarray):
-                value = float(value.reshape(-1)[0]) if value.size == 1 else None
+                value = value.reshape(-1)[0] if value.size == 1 and value.dtype.kind in "fiu" else None
             if shape not in ((1, 1),) or value is None or not math.isfinite(value) or value <= 0:
                 raise RecordingError(f"{display}: variable '{name}' must be one positive number (Hz)")
-            return nice_rate(float(value)), f"variable '{name}'"
-    return None, ""
+            value = nice_rate(float(value))
+            if rate is not None and not same_rate(rate, value):
+                raise RecordingError(f"{display}: {origin} says {rate:.9g} Hz but variable '{name}' {value:.9g} Hz")
+            rate, origin = (rate, origin) if rate is not None else (value, f"variable '{name}'")
+    return rate, origin
+
+
+def _file_rate(variables: dict, display: str, rate_of_time) -> tuple[float | None, str, str | None, int]:
+    """(rate, where it comes from, the time variable, its length) of a .mat file: every rate
+    variable and every time variable (``rate_of_time(name, n)`` reads its rate) must agree."""
+    rate, origin = _scalar_rate(variables, display)
+    time_name, n_time = None, 0
+    for name in TIME_NAMES:
+        if name not in variables:
+            continue
+        n = _check_time_shape(display, name, variables[name][0])
+        fs_time = rate_of_time(name, n)
+        if rate is not None and not same_rate(rate, fs_time):
+            raise RecordingError(f"{display}: time variable '{name}' gives {fs_time:.9g} Hz but {origin} says "
+                                 f"{rate:.9g} Hz")
+        if time_name is not None and n != n_time:
+            raise RecordingError(f"{display}: time variables '{time_name}' ({n_time} times) and '{name}' ({n}) "
+                                 "differ in length")
+        rate, origin = (rate, origin) if rate is not None else (fs_time, f"time variable '{name}'")
+        time_name, n_time = (time_name, n_time) if time_name is not None else (name, n)
+    return rate, origin, time_name, n_time
 
 
 def _check_time_shape(display: str, name: str, shape) -> int:
@@ -278,13 +308,6 @@ def _check_time_shape(display: str, name: str, shape) -> int:
     if len(shape) != 2 or (shape[0] != 1 and shape[1] != 1):
         raise RecordingError(f"{display}: time variable '{name}' is {_shown(shape)}; expected a vector")
     return max(shape)
-
-
-def _check_time(display: str, name: str, rate: float | None, fs_time: float):
-    if rate is not None and not same_rate(rate, fs_time):
-        raise RecordingError(
-            f"{display}: time variable '{name}' gives {fs_time:.9g} Hz but the rate variable says {rate:.9g} Hz"
-        )
 
 
 def _rate_for(display: str, time_name: str | None, n_time: int, rate: float | None):
@@ -319,18 +342,18 @@ def open_daq(path: Path, display: str, options: RunOptions) -> DaqFile:
         return _open_v73(path, display, options)
     variables = _v5_variables(path, display, options)
     group = None if options.group is None else str(options.group)
-    rate, origin = _scalar_rate(variables, display)
-    time_name = next((n for n in TIME_NAMES if n in variables), None)
-    n_time = 0
-    if time_name is not None:
-        shape, _, arr = variables[time_name]
-        n_time = _check_time_shape(display, time_name, shape)
+
+    def rate_of_time(name: str, n: int) -> float:
+        arr = variables[name][2]
         if arr is None:
-            arr = _load_v5(str(path), group, [time_name])[time_name]
+            arr = _load_v5(str(path), group, [name])[name]
+        if np.asarray(arr).dtype.kind not in "fiu":
+            raise RecordingError(f"{display}: time variable '{name}' holds {np.asarray(arr).dtype.name}; "
+                                 "expected real times in seconds")
         t = np.asarray(arr, dtype=np.float64).reshape(-1)
-        fs_time = rate_from_time(lambda a, b: t[a:b], t.size, f"{display}: time variable '{time_name}'")
-        _check_time(display, time_name, rate, fs_time)
-        rate, origin = (rate, origin) if rate is not None else (fs_time, f"time variable '{time_name}'")
+        return rate_from_time(lambda a, b: t[a:b], t.size, f"{display}: time variable '{name}'")
+
+    rate, origin, time_name, n_time = _file_rate(variables, display, rate_of_time)
     channels, ambiguous, aliases = _channels(variables, lambda name, col, shape: (name, col))
     return DaqFile(
         display=display,
@@ -341,7 +364,8 @@ def open_daq(path: Path, display: str, options: RunOptions) -> DaqFile:
         rate_origin=origin,
         rate_for=_rate_for(display, time_name, n_time, rate),
         make_source=lambda chans, dtype: MatSource(
-            keys=[ch.key for ch in chans], n_samples=chans[0].n_samples, dtype=dtype, path=str(path), group=group
+            keys=[ch.key for ch in chans], n_samples=chans[0].n_samples, dtype=dtype, path=str(path), group=group,
+            display=display,
         ),
     )
 
@@ -350,18 +374,13 @@ def _open_v73(path: Path, display: str, options: RunOptions) -> DaqFile:
     import h5py
 
     variables = _v73_metadata(path, display, options.group)
-    rate, origin = _scalar_rate(variables, display)
-    time_name = next((n for n in TIME_NAMES if n in variables), None)
-    n_time = 0
-    if time_name is not None:
-        shape, _, ds_path, _ = variables[time_name]
-        n_time = _check_time_shape(display, time_name, shape)
+
+    def rate_of_time(name: str, n: int) -> float:
         with h5py.File(path, "r") as f:
-            ds = f[ds_path]
-            fs_time = rate_from_time(lambda a, b: _h5_slice(ds, None, a, b), n_time,
-                                     f"{display}: time variable '{time_name}'")
-        _check_time(display, time_name, rate, fs_time)
-        rate, origin = (rate, origin) if rate is not None else (fs_time, f"time variable '{time_name}'")
+            ds = f[variables[name][2]]
+            return rate_from_time(lambda a, b: _h5_slice(ds, None, a, b), n, f"{display}: time variable '{name}'")
+
+    rate, origin, time_name, n_time = _file_rate(variables, display, rate_of_time)
     channels, ambiguous, aliases = _channels(variables, lambda name, col, shape: (variables[name][2], col))
     return DaqFile(
         display=display,
