@@ -342,7 +342,41 @@ def test_text_time_column_written_with_few_digits(tmp_path):
     assert daq.rate_for(daq.channels) == pytest.approx(fs, rel=1e-7)
     (tmp_path / "x.csv").write_text("Time [s];Hammer;A_Y\n" + "\n".join(rows[:10000] + rows[10001:]) + "\n")
     daq = open_daq(tmp_path / "x.csv", "x.csv", RunOptions("t.toml: runs.a"))
-    with pytest.raises(ValueError, match=r"x.csv: time column 'Time': spacing not uniform"):
+    with pytest.raises(ValueError, match=r"x.csv: time column 'Time': times jump by 4e-05 s, from 0.19529 s to "
+                                         r"0.19533 s between samples 10000 and 10001"):
+        daq.rate_for(daq.channels)
+
+
+def _g_time_export(path, gap_at=None, gap_s=0.04, fs=51200.0, last_s=0.5):
+    """A text export whose time column is written ``%g`` (6 significant digits, trailing zeros
+    dropped: the last row is ``0.5``), with a gap of ``gap_s`` after sample ``gap_at``."""
+    n = int(round(last_s * fs)) + 1
+    k = np.arange(n)
+    if gap_at is not None:
+        k = k[: n - int(round(gap_s * fs))]
+        k[gap_at:] += int(round(gap_s * fs))
+    t = k / fs
+    path.write_text("Time;Hammer\n" + "".join(f"{a:g};{np.sin(a * 1e3):.6f}\n" for a in t))
+    return t
+
+
+def test_text_time_column_written_g_with_a_gap_is_refused(tmp_path):
+    """``%g`` times: each row's own printed step bounds its rounding (``0.5`` 0.1 s, ``0.234355`` 1e-6 s).
+    Before, the last row's step alone (0.1 s, 2560 periods) let a 40 ms gap through: 45294 Hz for
+    51200 (K -13.5 % in the issue's case), exit 0."""
+    from guidefit.io._daq import RunOptions
+    from guidefit.io.text import open_daq
+
+    t = _g_time_export(tmp_path / "x.csv")
+    assert (tmp_path / "x.csv").read_text().endswith("\n0.5;-0.467772\n")
+    daq = open_daq(tmp_path / "x.csv", "x.csv", RunOptions("t.toml: runs.a"))
+    # the times are off by up to half a microsecond over half a second
+    assert daq.rate_for(daq.channels) == pytest.approx(51200.0, rel=2e-6)
+    assert daq.count_rows(daq.channels) == t.size
+    _g_time_export(tmp_path / "x.csv", gap_at=12000)
+    daq = open_daq(tmp_path / "x.csv", "x.csv", RunOptions("t.toml: runs.a"))
+    with pytest.raises(ValueError, match=r"^x.csv: time column 'Time': times jump by 0.04002 s, from 0.234355 s to "
+                                         r"0.274375 s between samples 12000 and 12001; expected equally spaced"):
         daq.rate_for(daq.channels)
 
 
@@ -386,3 +420,92 @@ def test_mat_vectors_columns_rate_and_time(tmp_path, version, in_struct):
     chans = (daq.find("Hammer"), daq.find("acc:1"))
     block = daq.make_source(chans, np.float64).read((slice(10, 20), slice(None)))
     np.testing.assert_allclose(block, np.column_stack([hammer[10:20], acc[10:20, 1]]), rtol=1e-15)
+
+
+def _write_mat(path, version, variables, group=None):
+    import scipy.io
+
+    if version == "v5":
+        scipy.io.savemat(path, {group: variables} if group else variables)
+    else:
+        write_mat73(path, variables, group=group)
+
+
+@pytest.mark.parametrize("version", ["v5", "v73"])
+@pytest.mark.parametrize("group", [None, "rec"])
+@pytest.mark.parametrize("n_time", [100, 299, 301, 2000])
+def test_mat_time_vector_of_another_length_is_refused(tmp_path, version, group, n_time):
+    """A time vector ``t`` shorter or longer than the channels describes other samples: refused
+    when a run uses them (before: its rate was used, lengths never compared; K_V -9.8 % / +21 %
+    with exit 0). A time vector of the channels' length gives the rate."""
+    from guidefit.io._daq import RunOptions
+    from guidefit.io.mat import open_daq
+
+    data = np.random.default_rng(1).normal(size=(300, 3))
+    _write_mat(tmp_path / "x.mat", version, {"data": data, "t": np.arange(n_time) / 1900.0}, group)
+    daq = open_daq(tmp_path / "x.mat", "x.mat", RunOptions("t.toml: runs.a", group=group))
+    with pytest.raises(ValueError, match=rf"^x.mat: time variable 't' holds {n_time} times but channel 'data:0' "
+                                         r"300 samples; a time vector needs one time per sample$"):
+        daq.rate_for(daq.channels)
+    _write_mat(tmp_path / "x.mat", version, {"data": data, "t": np.arange(300) / 1900.0}, group)
+    daq = open_daq(tmp_path / "x.mat", "x.mat", RunOptions("t.toml: runs.a", group=group))
+    assert daq.rate_for(daq.channels) == pytest.approx(1900.0, rel=1e-12)
+
+
+@pytest.mark.parametrize("version", ["v5", "v73"])
+@pytest.mark.parametrize("t", [np.r_[np.arange(150), np.arange(150) + 170] / 1900.0,  # a gap of 20 samples
+                               np.r_[np.arange(150), np.arange(150)] / 1900.0,  # two records joined
+                               np.arange(300) ** 1.01 / 1900.0],  # not one rate
+                         ids=["gap", "joined", "drift"])
+def test_mat_time_vector_not_uniform_is_refused(tmp_path, version, t):
+    from guidefit.io._daq import RunOptions
+    from guidefit.io.mat import open_daq
+
+    _write_mat(tmp_path / "x.mat", version, {"data": np.ones((300, 2)), "t": t})
+    with pytest.raises(ValueError, match=r"^x.mat: time variable 't': (times jump|times not increasing|spacing not)"):
+        open_daq(tmp_path / "x.mat", "x.mat", RunOptions("t.toml: runs.a"))
+
+
+@pytest.mark.parametrize("version", ["v5", "v73"])
+@pytest.mark.parametrize("group", [None, "rec"])
+def test_mat_variable_of_three_dimensions(tmp_path, version, group):
+    """A 3-D variable is no channel: the others are read (before, in v5: an internal error, exit 1);
+    a source that names it, or a 3-D time vector, is told why in one line."""
+    from guidefit.io._daq import RunOptions
+    from guidefit.io.mat import open_daq
+
+    data = np.arange(600.0).reshape(300, 2)
+    variables = {"data": data, "fs": 1900.0, "cube": np.zeros((4, 3, 2))}
+    _write_mat(tmp_path / "x.mat", version, variables, group)
+    daq = open_daq(tmp_path / "x.mat", "x.mat", RunOptions("t.toml: runs.a", group=group))
+    assert [c.name for c in daq.channels] == ["data:0", "data:1"]
+    assert daq.rate_for(daq.channels) == pytest.approx(1900.0)
+    block = daq.make_source(daq.channels, np.float64).read((slice(0, 300), slice(None)))
+    np.testing.assert_array_equal(block, data)
+    for source in ("cube", "cube:1"):
+        with pytest.raises(ValueError, match=r"^x.mat: variable 'cube' is 4 x 3 x 2; a channel is a vector or a "
+                                             r"column of a 2-D array whose rows are samples$"):
+            daq.find(source)
+    _write_mat(tmp_path / "x.mat", version, {"data": data, "t": np.zeros((300, 2, 2))}, group)
+    with pytest.raises(ValueError, match=r"^x.mat: time variable 't' is 300 x 2 x 2; expected a vector$"):
+        open_daq(tmp_path / "x.mat", "x.mat", RunOptions("t.toml: runs.a", group=group))
+
+
+@pytest.mark.parametrize("version", ["v5", "v73"])
+@pytest.mark.parametrize("variables, message", [
+    ({"fs": 1900.0, "Fs": 1000.0}, r"variable 'fs' says 1900 Hz but variable 'Fs' 1000 Hz"),
+    ({"Fs": 1900.0, "t": np.arange(300) / 1000.0}, r"time variable 't' gives 1000 Hz but variable 'Fs' says 1900 Hz"),
+    ({"t": np.arange(300) / 1900.0, "time": np.arange(299) / 1900.0},
+     r"time variables 't' \(300 times\) and 'time' \(299\) differ in length"),
+    ({"t": np.arange(300) / 1900.0, "time": np.arange(300) / 1000.0},
+     r"time variable 'time' gives 1000 Hz but time variable 't' says 1900 Hz"),
+], ids=["fs-Fs", "Fs-t", "t-time-length", "t-time-rate"])
+def test_mat_every_rate_and_time_variable_must_agree(tmp_path, version, variables, message):
+    """Each way a .mat file states its rate is checked, not only the first found (before: ``Fs``
+    beside a disagreeing ``fs``, or ``time`` beside ``t``, was ignored)."""
+    from guidefit.io._daq import RunOptions
+    from guidefit.io.mat import open_daq
+
+    _write_mat(tmp_path / "x.mat", version, {"data": np.ones((300, 2)), **variables})
+    with pytest.raises(ValueError, match="^x.mat: " + message):
+        open_daq(tmp_path / "x.mat", "x.mat", RunOptions("t.toml: runs.a"))

@@ -342,6 +342,23 @@ def test_text_without_time_needs_sample_rate(folder):
     np.testing.assert_allclose(run.read_block(5, 6)[0, 1], x[5, 2] * 1000 / 10.2 * 9.80665, rtol=1e-8)
 
 
+def test_text_time_column_with_a_gap_is_exit_2_and_one_line(folder):
+    """Times written ``%g`` (the last row ``0.1``) with a 20 ms gap: refused in one line that says
+    where, exit 2 (before: the last row's step, 0.1 s, let it through with a rate 11 % off, exit 0)."""
+    k = np.arange(int(0.1 * RATE) + 1 - 1024)
+    k[2000:] += 1024
+    t = k / RATE
+    rows = [f"{a:g};{np.sin(3e3 * a):.6f};{np.cos(3e3 * a):.6f};{0.5 * np.sin(5e3 * a):.6f}" for a in t]
+    assert rows[-1].startswith("0.1;")
+    (folder / "vertical.csv").write_text("Time;Hammer;AccA_Y;AccB_Y\n" + "\n".join(rows) + "\n")
+    (folder / "test.toml").write_text(GOOD.replace("vertical.tdms", "vertical.csv").split("[runs.lateral]")[0])
+    result = CliRunner().invoke(main, ["identify", "test.toml"])
+    lines = _lines(result)
+    assert result.exit_code == 2 and len(lines) == 1, lines
+    assert ("vertical.csv: time column 'Time': times jump by 0.0200195 s, from 0.039043 s to 0.0590625 s "
+            "between samples 2000 and 2001") in lines[0]
+
+
 def test_mat_wide_array_is_explained(folder):
     import scipy.io
 
@@ -352,6 +369,45 @@ def test_mat_wide_array_is_explained(folder):
     with pytest.raises(ValueError, match=r"vertical\.mat: variable 'data' is 3 x 500; 'data:k' is column k .* "
                                          r"transpose it"):
         read_recording("test.toml")
+
+
+@pytest.mark.parametrize("n_time", [1000, 4096])
+def test_mat_time_vector_of_another_length_is_exit_2_and_one_line(folder, n_time):
+    """``savemat(f, {"data": n x 3, "t": 1000 times})``: the rate of a time vector that is not the
+    channels' is not theirs (before: used, K_V -9.8 % / +21 % with exit 0)."""
+    import scipy.io
+
+    t = np.arange(N) / RATE
+    data = np.column_stack([np.exp(-((t - 0.005) / 1e-4) ** 2), np.sin(2e3 * t), np.cos(2e3 * t)])
+    scipy.io.savemat(folder / "vertical.mat", {"data": data, "t": np.arange(n_time) / 19000.0,
+                                               "unused": np.zeros((2, 3, 4))})
+    text = GOOD.replace("vertical.tdms", "vertical.mat").split("[runs.lateral]")[0]
+    text = text.replace('"Hammer"', '"data:0"').replace('"AccA_Y"', '"data:1"').replace('"AccB_Y"', '"data:2"')
+    (folder / "test.toml").write_text(text)
+    result = CliRunner().invoke(main, ["identify", "test.toml"])
+    lines = _lines(result)
+    assert result.exit_code == 2 and len(lines) == 1, lines
+    assert f"vertical.mat: time variable 't' holds {n_time} times but channel 'data:0' {N} samples" in lines[0]
+    scipy.io.savemat(folder / "vertical.mat", {"data": data, "t": t, "unused": np.zeros((2, 3, 4))})
+    run = read_recording("test.toml").runs[0]  # the 3-D variable no channel names is not read
+    assert run.sample_rate_hz == pytest.approx(RATE, rel=1e-12) and run.n_samples == N
+
+
+def test_mat_complex_channels_are_exit_2_and_one_line(folder):
+    """A v5 variable of complex numbers (whosmat calls it 'double'): refused where it is read,
+    not cast to its real part with a numpy warning."""
+    import scipy.io
+
+    t = np.arange(N) / RATE
+    data = np.column_stack([np.exp(-((t - 0.005) / 1e-4) ** 2), np.sin(2e3 * t), np.cos(2e3 * t)])
+    scipy.io.savemat(folder / "vertical.mat", {"data": data * (1 + 0.5j), "fs": RATE})
+    text = GOOD.replace("vertical.tdms", "vertical.mat").split("[runs.lateral]")[0]
+    text = text.replace('"Hammer"', '"data:0"').replace('"AccA_Y"', '"data:1"').replace('"AccB_Y"', '"data:2"')
+    (folder / "test.toml").write_text(text)
+    result = CliRunner().invoke(main, ["identify", "test.toml"])
+    lines = _lines(result)
+    assert result.exit_code == 2 and len(lines) == 1, lines
+    assert "vertical.mat: variable 'data' holds complex128 numbers; expected real samples" in lines[0]
 
 
 @pytest.fixture(scope="module")

@@ -328,44 +328,65 @@ def nice_rate(rate: float) -> float:
 _TIME_CHUNK = 1 << 20
 
 
-def rate_from_time(read: Callable[[int, int], np.ndarray], n: int, where: str, resolution_s: float = 0.0) -> float:
+def rate_from_time(read: Callable[[int, int], np.ndarray], n: int, where: str,
+                   resolution_s: float | np.ndarray = 0.0) -> float:
     """The sample rate of a time axis read in chunks: least-squares slope, checked for uniform spacing.
 
     ``read(start, stop)`` gives times (s) ``start:stop``; memory is one chunk.
     ``resolution_s`` is the step of times written with few digits (a text export's
-    ``12.34568``: 1e-5 s); a time may be off by half of it besides 0.1 sample period.
+    ``12.34568``: 1e-5 s), one number for all times or one per time (``%g`` writes
+    ``0.5`` and ``0.500013``): each time may be off by half of its own step besides
+    0.1 sample period. A time further off than that is refused; when a jump between
+    two consecutive times explains it (a gap, two records joined), the message names
+    where.
 
     Raises
     ------
     RecordingError
-        Fewer than two samples, non-finite or decreasing times, or spacing
-        that deviates from uniform by more than 0.1 sample period.
+        Fewer than two samples, non-finite or decreasing times, a jump, or spacing
+        that deviates from uniform by more than 0.1 sample period (plus rounding).
 
     Examples
     --------
     >>> t = np.arange(1000) / 51200.0
     >>> rate_from_time(lambda a, b: t[a:b], t.size, "x.mf4: time")
     51200.0
+    >>> t[600:] += 0.01
+    >>> rate_from_time(lambda a, b: t[a:b], t.size, "x.mf4: time")
+    Traceback (most recent call last):
+    ...
+    guidefit.errors.RecordingError: x.mf4: time: times jump by 0.0100195 s, from 0.0116992188 s to 0.02171875 s \
+between samples 600 and 601; expected equally spaced times (a gap in the record?)
     """
     if n < 2:
         raise RecordingError(f"{where}: {n} sample(s); a time axis needs two to give a sample rate")
+    per_row = np.ndim(resolution_s) > 0
+    if per_row and np.shape(resolution_s) != (n,):
+        raise ValueError(f"resolution_s: {np.shape(resolution_s)} values for {n} times")
+
+    def res(a: int, b: int):
+        return np.asarray(resolution_s[a:b], dtype=np.float64) if per_row else float(resolution_s)
+
     k_mean = (n - 1) / 2.0
     t0 = None  # times are taken relative to the first (MDF time channels may hold epoch seconds)
-    previous = None
+    previous = previous_r = None
     t_sum = skk = skt = 0.0
     for a in range(0, n, _TIME_CHUNK):  # pass 1: checks and the least-squares sums
         t = np.asarray(read(a, min(n, a + _TIME_CHUNK)), dtype=np.float64).reshape(-1)
+        r = np.broadcast_to(res(a, a + t.size), t.shape)
         if not np.all(np.isfinite(t)):
             raise RecordingError(f"{where}: holds non-finite times")
-        steps = np.diff(t if previous is None else np.concatenate([[previous], t]))
+        joined = t if previous is None else np.concatenate([[previous], t])
+        joined_r = r if previous is None else np.concatenate([[previous_r], r])
+        steps = np.diff(joined)
         # times written to a step coarser than the sample period repeat; they never decrease
-        bad = steps < 0 if resolution_s > 0 else steps <= 0
+        bad = np.where(joined_r[1:] + joined_r[:-1] > 0, steps < 0, steps <= 0)
         if np.any(bad):
             k = a + int(np.flatnonzero(bad)[0]) - (previous is not None)
             raise RecordingError(
                 f"{where}: times not increasing at sample {k + 1}; expected equally spaced times"
             )
-        previous = t[-1]
+        previous, previous_r = t[-1], r[-1]
         t0 = t[0] if t0 is None else t0
         kc = np.arange(a, a + t.size, dtype=np.float64) - k_mean
         skk += float(kc @ kc)
@@ -374,18 +395,49 @@ def rate_from_time(read: Callable[[int, int], np.ndarray], n: int, where: str, r
     if not skt > 0:
         raise RecordingError(f"{where}: all times equal; expected equally spaced times")
     fs = skk / skt
-    t_mean = t_sum / n
-    worst = 0.0
-    for a in range(0, n, _TIME_CHUNK):  # pass 2: every time within tolerance of the line
-        t = np.asarray(read(a, min(n, a + _TIME_CHUNK)), dtype=np.float64).reshape(-1) - t0
-        kc = np.arange(a, a + t.size, dtype=np.float64) - k_mean
-        worst = max(worst, float(np.max(np.abs(t - t_mean - kc / fs))) * fs)
-    allowed = 0.1 + 0.5 * resolution_s * fs
-    if worst > allowed:
-        printed = f", {allowed - 0.1:.2g} of them from the {resolution_s:.3g} s the times are written to" \
-            if resolution_s else ""
+    worst, jump = _worst_deviation(read, res, n, t0, t_sum / n, k_mean, fs)
+    if worst[0] > 0:
+        if jump[0] > 0:
+            _, k, before, after = jump
+            raise RecordingError(
+                f"{where}: times jump by {after - before:.6g} s, from {before:.9g} s to {after:.9g} s between "
+                f"samples {k} and {k + 1}; expected equally spaced times (a gap in the record?)"
+            )
+        _, k, off, allowed, step = worst
+        printed = f", {allowed - 0.1:.2g} of them from the {step:.3g} s the time is written to" if step else ""
         raise RecordingError(
-            f"{where}: spacing not uniform (a sample is {worst:.2g} sample periods off, {allowed:.2g} allowed"
-            f"{printed}); expected a constant sample rate"
+            f"{where}: spacing not uniform (sample {k + 1} is {off:.2g} sample periods off the line, {allowed:.2g} "
+            f"allowed{printed}); expected a constant sample rate"
         )
     return nice_rate(fs)
+
+
+def _worst_deviation(read, res, n: int, t0: float, t_mean: float, k_mean: float, fs: float):
+    """Pass 2 of :func:`rate_from_time`: the time furthest off the fitted line beyond what it
+    may be off (excess in sample periods, sample, periods off, periods allowed, its printed step) and
+    the jump between consecutive times furthest beyond its allowance (excess, later sample
+    (0-based), the two times): each time may be off 0.1 period plus half its printed step, so two
+    consecutive times' step may be off 0.2 period plus half of both steps (a jump beyond that
+    is beyond the line's tolerance too)."""
+    worst = (-np.inf, 0, 0.0, 0.0, 0.0)
+    jump = (-np.inf, 0, 0.0, 0.0)
+    previous = previous_r = None
+    for a in range(0, n, _TIME_CHUNK):
+        t = np.asarray(read(a, min(n, a + _TIME_CHUNK)), dtype=np.float64).reshape(-1) - t0
+        r = np.broadcast_to(res(a, a + t.size), t.shape)
+        kc = np.arange(a, a + t.size, dtype=np.float64) - k_mean
+        off = np.abs(t - t_mean - kc / fs) * fs
+        allowed = 0.1 + 0.5 * r * fs
+        i = int(np.argmax(off - allowed))
+        if off[i] - allowed[i] > worst[0]:
+            worst = (off[i] - allowed[i], a + i, off[i], allowed[i], r[i])
+        joined = t if previous is None else np.concatenate([[previous], t])
+        joined_r = r if previous is None else np.concatenate([[previous_r], r])
+        excess = np.abs(np.diff(joined) * fs - 1.0) - (0.2 + 0.5 * (joined_r[1:] + joined_r[:-1]) * fs)
+        if excess.size:
+            j = int(np.argmax(excess))
+            if excess[j] > jump[0]:
+                k = a + j + (previous is None)  # 0-based index of the later time
+                jump = (excess[j], k, joined[j] + t0, joined[j + 1] + t0)
+        previous, previous_r = t[-1], r[-1]
+    return worst, jump

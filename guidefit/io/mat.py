@@ -8,7 +8,10 @@ variable name (a vector) or ``variable:k`` for column ``k`` (0-based) of a
 ``group`` is the name of a struct whose fields are the variables. The sample
 rate comes from a scalar variable ``fs``, ``Fs`` or ``sample_rate_hz``, or a
 time vector ``t`` or ``time`` (seconds, uniformly spaced); if both exist
-they must agree. .mat files state no units.
+they must agree, and a time vector must hold one time per sample of every
+channel a run reads (a time vector of another length describes other data).
+Variables of three or more dimensions are no channels: a ``source`` that
+names one is told so. .mat files state no units.
 
 MATLAB stores arrays column-major: in a v7.3 (HDF5) file an ``n x k``
 MATLAB array is a dataset of shape ``(k, n)``, so column ``k`` of the
@@ -77,6 +80,10 @@ class MatSource(ColumnSource):
 
     def _read(self, handle, start, stop, keys):
         arrays = self._arrays()
+        for name, _ in keys:
+            if np.asarray(arrays[name]).dtype.kind not in "fiu":  # whosmat calls complex arrays 'double'
+                raise RecordingError(f"{self.facts.get('display', self.facts['path'])}: variable '{name}' holds "
+                                     f"{np.asarray(arrays[name]).dtype.name} numbers; expected real samples")
         return [_v5_column(arrays[name], col)[start:stop] for name, col in keys]
 
 
@@ -156,7 +163,7 @@ def _v5_variables(path: Path, display: str, options: RunOptions) -> dict:
     for name, value in struct.items():
         arr = np.asarray(value) if not isinstance(value, (str, dict, list)) else None
         if arr is not None and _numeric(arr):
-            arr2 = arr.reshape(-1, 1) if arr.ndim <= 1 else arr
+            arr2 = arr.reshape(-1, 1) if arr.ndim <= 1 else arr  # 3-D and more: explained if named
             out[name] = (arr2.shape, np.dtype(np.float32 if arr.dtype == np.float32 else np.float64), arr2)
     return out
 
@@ -197,12 +204,12 @@ def _v73_variables(p: Path, display: str, group) -> dict:
                 continue
             cls = obj.attrs.get("MATLAB_class", b"")
             cls = cls.decode() if isinstance(cls, bytes) else str(cls)
-            if cls not in _NUMERIC_CLASSES or obj.ndim != 2 or obj.dtype.kind not in "fiu" or obj.size == 0:
+            if cls not in _NUMERIC_CLASSES or obj.dtype.kind not in "fiu" or obj.size == 0:
                 continue
             if bool(obj.attrs.get("MATLAB_empty", 0)):
                 continue
             _check_storage(obj, p, f"{display}: variable '{name}'")
-            shape = (int(obj.shape[1]), int(obj.shape[0]))  # MATLAB's rows x columns
+            shape = tuple(int(d) for d in reversed(obj.shape))  # MATLAB's rows x columns (x pages...)
             value = float(obj[0, 0]) if obj.size == 1 else None
             out[name] = (shape, np.dtype(np.float32 if obj.dtype == np.float32 else np.float64), obj.name, value)
         return out
@@ -217,12 +224,27 @@ def _v73_metadata(p: Path, display: str, group) -> dict:
 # ------------------------------------------------------------------- channels
 
 
+_MAX_EXPLAINED_COLUMNS = 1024
+
+
+def _shown(shape) -> str:
+    return " x ".join(str(d) for d in shape)
+
+
 def _channels(variables: dict, key_of) -> tuple[list, dict, dict]:
     """DaqChannels of the vectors and of the columns of 2-D arrays; ``name:0`` of a column
-    vector (n x 1, a 2-D array in MATLAB); wide arrays explained."""
+    vector (n x 1, a 2-D array in MATLAB); wide arrays and arrays of more dimensions (not
+    channels, but a ``source`` that names one is told why) explained."""
     channels, ambiguous, aliases = [], {}, {}
     for name, (shape, dtype, *_rest) in variables.items():
         if name in RATE_NAMES + TIME_NAMES:
+            continue
+        if len(shape) != 2:
+            why = (f"variable '{name}' is {_shown(shape)}; a channel is a vector or a column of a 2-D array "
+                   "whose rows are samples")
+            ambiguous[name] = why
+            ambiguous.update({f"{name}:{k}": why for k in range(min(shape[1] if len(shape) > 1 else 1,
+                                                                    _MAX_EXPLAINED_COLUMNS))})
             continue
         rows, cols = shape
         if rows == 1 or cols == 1:
@@ -243,26 +265,66 @@ def _channels(variables: dict, key_of) -> tuple[list, dict, dict]:
 
 
 def _scalar_rate(variables: dict, display: str) -> tuple[float | None, str]:
+    """The rate of the variables ``fs``, ``Fs``, ``sample_rate_hz`` (all that exist must agree)."""
+    rate, origin = None, ""
     for name in RATE_NAMES:
         if name in variables:
             shape, _, *rest = variables[name]
             value = rest[-1]
             if isinstance(value, np.ndarray):
-                value = float(value.reshape(-1)[0]) if value.size == 1 else None
+                value = value.reshape(-1)[0] if value.size == 1 and value.dtype.kind in "fiu" else None
             if shape not in ((1, 1),) or value is None or not math.isfinite(value) or value <= 0:
                 raise RecordingError(f"{display}: variable '{name}' must be one positive number (Hz)")
-            return nice_rate(float(value)), f"variable '{name}'"
-    return None, ""
+            value = nice_rate(float(value))
+            if rate is not None and not same_rate(rate, value):
+                raise RecordingError(f"{display}: {origin} says {rate:.9g} Hz but variable '{name}' {value:.9g} Hz")
+            rate, origin = (rate, origin) if rate is not None else (value, f"variable '{name}'")
+    return rate, origin
 
 
-def _check_time(display: str, name: str, shape, n_time: int, rate: float | None, fs_time: float):
-    rows, cols = shape
-    if rows != 1 and cols != 1:
-        raise RecordingError(f"{display}: time variable '{name}' is {rows} x {cols}; expected a vector")
-    if rate is not None and not same_rate(rate, fs_time):
-        raise RecordingError(
-            f"{display}: time variable '{name}' gives {fs_time:.9g} Hz but the rate variable says {rate:.9g} Hz"
-        )
+def _file_rate(variables: dict, display: str, rate_of_time) -> tuple[float | None, str, str | None, int]:
+    """(rate, where it comes from, the time variable, its length) of a .mat file: every rate
+    variable and every time variable (``rate_of_time(name, n)`` reads its rate) must agree."""
+    rate, origin = _scalar_rate(variables, display)
+    time_name, n_time = None, 0
+    for name in TIME_NAMES:
+        if name not in variables:
+            continue
+        n = _check_time_shape(display, name, variables[name][0])
+        fs_time = rate_of_time(name, n)
+        if rate is not None and not same_rate(rate, fs_time):
+            raise RecordingError(f"{display}: time variable '{name}' gives {fs_time:.9g} Hz but {origin} says "
+                                 f"{rate:.9g} Hz")
+        if time_name is not None and n != n_time:
+            raise RecordingError(f"{display}: time variables '{time_name}' ({n_time} times) and '{name}' ({n}) "
+                                 "differ in length")
+        rate, origin = (rate, origin) if rate is not None else (fs_time, f"time variable '{name}'")
+        time_name, n_time = (time_name, n_time) if time_name is not None else (name, n)
+    return rate, origin, time_name, n_time
+
+
+def _check_time_shape(display: str, name: str, shape) -> int:
+    """The number of times of a time variable; one line if it is not a vector."""
+    if len(shape) != 2 or (shape[0] != 1 and shape[1] != 1):
+        raise RecordingError(f"{display}: time variable '{name}' is {_shown(shape)}; expected a vector")
+    return max(shape)
+
+
+def _rate_for(display: str, time_name: str | None, n_time: int, rate: float | None):
+    """``DaqFile.rate_for`` of a .mat file: the file's rate, once every channel of the run has
+    one sample per time of the time vector (a time vector of another length describes
+    other data: its rate is not theirs)."""
+
+    def rate_for(chans) -> float | None:
+        for ch in chans if time_name is not None else ():
+            if ch.n_samples != n_time:
+                raise RecordingError(
+                    f"{display}: time variable '{time_name}' holds {n_time} times but channel '{ch.name}' "
+                    f"{ch.n_samples} samples; a time vector needs one time per sample"
+                )
+        return rate
+
+    return rate_for
 
 
 def open_daq(path: Path, display: str, options: RunOptions) -> DaqFile:
@@ -272,23 +334,26 @@ def open_daq(path: Path, display: str, options: RunOptions) -> DaqFile:
     ------
     RecordingError
         Not a MAT file; an unknown struct; a rate variable that is not one
-        positive number; a time variable that is not uniform or disagrees
-        with the rate variable.
+        positive number; a time variable that is not a vector, not uniform or
+        disagrees with the rate variable (and, from ``rate_for``, one whose
+        length is not the run's channels').
     """
     if _is_v73(path):
         return _open_v73(path, display, options)
     variables = _v5_variables(path, display, options)
     group = None if options.group is None else str(options.group)
-    rate, origin = _scalar_rate(variables, display)
-    time_name = next((n for n in TIME_NAMES if n in variables), None)
-    if time_name is not None:
-        shape, _, arr = variables[time_name]
+
+    def rate_of_time(name: str, n: int) -> float:
+        arr = variables[name][2]
         if arr is None:
-            arr = _load_v5(str(path), group, [time_name])[time_name]
+            arr = _load_v5(str(path), group, [name])[name]
+        if np.asarray(arr).dtype.kind not in "fiu":
+            raise RecordingError(f"{display}: time variable '{name}' holds {np.asarray(arr).dtype.name}; "
+                                 "expected real times in seconds")
         t = np.asarray(arr, dtype=np.float64).reshape(-1)
-        fs_time = rate_from_time(lambda a, b: t[a:b], t.size, f"{display}: time variable '{time_name}'")
-        _check_time(display, time_name, shape, t.size, rate, fs_time)
-        rate, origin = (rate, origin) if rate is not None else (fs_time, f"time variable '{time_name}'")
+        return rate_from_time(lambda a, b: t[a:b], t.size, f"{display}: time variable '{name}'")
+
+    rate, origin, time_name, n_time = _file_rate(variables, display, rate_of_time)
     channels, ambiguous, aliases = _channels(variables, lambda name, col, shape: (name, col))
     return DaqFile(
         display=display,
@@ -297,8 +362,10 @@ def open_daq(path: Path, display: str, options: RunOptions) -> DaqFile:
         aliases=aliases,
         sample_rate_hz=rate,
         rate_origin=origin,
+        rate_for=_rate_for(display, time_name, n_time, rate),
         make_source=lambda chans, dtype: MatSource(
-            keys=[ch.key for ch in chans], n_samples=chans[0].n_samples, dtype=dtype, path=str(path), group=group
+            keys=[ch.key for ch in chans], n_samples=chans[0].n_samples, dtype=dtype, path=str(path), group=group,
+            display=display,
         ),
     )
 
@@ -307,17 +374,13 @@ def _open_v73(path: Path, display: str, options: RunOptions) -> DaqFile:
     import h5py
 
     variables = _v73_metadata(path, display, options.group)
-    rate, origin = _scalar_rate(variables, display)
-    time_name = next((n for n in TIME_NAMES if n in variables), None)
-    if time_name is not None:
-        shape, _, ds_path, _ = variables[time_name]
+
+    def rate_of_time(name: str, n: int) -> float:
         with h5py.File(path, "r") as f:
-            ds = f[ds_path]
-            n = max(shape)
-            fs_time = rate_from_time(lambda a, b: _h5_slice(ds, None, a, b), n,
-                                     f"{display}: time variable '{time_name}'")
-        _check_time(display, time_name, shape, n, rate, fs_time)
-        rate, origin = (rate, origin) if rate is not None else (fs_time, f"time variable '{time_name}'")
+            ds = f[variables[name][2]]
+            return rate_from_time(lambda a, b: _h5_slice(ds, None, a, b), n, f"{display}: time variable '{name}'")
+
+    rate, origin, time_name, n_time = _file_rate(variables, display, rate_of_time)
     channels, ambiguous, aliases = _channels(variables, lambda name, col, shape: (variables[name][2], col))
     return DaqFile(
         display=display,
@@ -327,6 +390,7 @@ def _open_v73(path: Path, display: str, options: RunOptions) -> DaqFile:
         note="" if channels else "no numeric MATLAB variables (datasets with a MATLAB_class attribute)",
         sample_rate_hz=rate,
         rate_origin=origin,
+        rate_for=_rate_for(display, time_name, n_time, rate),
         make_source=lambda chans, dtype: MatH5Source(
             keys=[ch.key for ch in chans], n_samples=chans[0].n_samples, dtype=dtype, path=str(path)
         ),

@@ -332,10 +332,18 @@ def parse_columns(path: Path, display: str, dialect: Dialect, columns: list[int]
         A row that is not numbers where a used column is: one line naming the
         line, the column and the text.
     """
+    return parse_with_steps(path, display, dialect, columns, encoding, names)[0]
+
+
+def parse_with_steps(path: Path, display: str, dialect: Dialect, columns: list[int], encoding: str,
+                     names: list[str], step_column: int | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+    """:func:`parse_columns`, and the step each row writes column ``step_column`` to (its
+    printed precision, :func:`_printed_steps`), or None without ``step_column``."""
     import warnings
 
     max_rows = max(1, _count_lines(path) - dialect.data_line + 1)
     table = np.empty((max_rows, len(columns)), dtype=np.float64)
+    steps = [] if step_column is not None else None
     filled = 0
     delimiter = None if dialect.delimiter == " " else dialect.delimiter
     with open(path, encoding=encoding, errors="replace", newline=None) as fh:
@@ -352,6 +360,9 @@ def parse_columns(path: Path, display: str, dialect: Dialect, columns: list[int]
                     warnings.simplefilter("ignore", UserWarning)  # a block of blank lines
                     block = np.loadtxt(text, delimiter=delimiter, usecols=columns, dtype=np.float64,
                                        comments=None, ndmin=2)
+                    if steps is not None and block.size:
+                        steps.append(_printed_steps(np.loadtxt(text, delimiter=delimiter, usecols=[step_column],
+                                                               dtype=str, comments=None, ndmin=1)))
             except (ValueError, IndexError) as exc:
                 raise _locate(lines, line_no, dialect, columns, names, display, exc) from None
             if block.size:
@@ -360,7 +371,9 @@ def parse_columns(path: Path, display: str, dialect: Dialect, columns: list[int]
                 table[filled:filled + block.shape[0]] = block
                 filled += block.shape[0]
             line_no += len(lines)
-    return table[:filled]
+    if steps is not None:
+        steps = np.concatenate(steps) if steps else np.zeros(0)
+    return table[:filled], steps
 
 
 def _locate(lines, first_no, dialect, columns, names, display, exc) -> RecordingError:
@@ -399,20 +412,25 @@ def _step_of(text: str, decimal: str) -> float:
     return float(f"1e{power - digits}")
 
 
-def _printed_step(path: Path, encoding: str, dialect: Dialect, column: int) -> float:
-    """The step of the numbers in ``column`` as the last data row writes them (the largest times
-    have the fewest decimals), read from the end of the file."""
-    with open(path, "rb") as fh:
-        if encoding == "utf-16":
-            encoding = "utf-16-le" if fh.read(2) == b"\xff\xfe" else "utf-16-be"
-        fh.seek(0, 2)
-        fh.seek(max(2, fh.tell() - 4096) & ~1)  # whole UTF-16 code units
-        tail = fh.read().decode(encoding.replace("-sig", ""), errors="replace")
-    for line in reversed(tail.splitlines()):
-        fields = _split(line, dialect.delimiter)
-        if len(fields) == dialect.n_fields and _number(fields[column], dialect.decimal) is not None:
-            return _step_of(fields[column], dialect.decimal)
-    return 0.0
+def _printed_steps(fields: np.ndarray) -> np.ndarray:
+    """The step each of ``fields`` (numbers as written, ``.`` as decimal mark) is written to,
+    row by row: ``%g`` writes ``0.5`` (0.1) and ``0.500013`` (1e-6) in one column, so no
+    one row tells the column's precision.
+
+    >>> _printed_steps(np.array(["0.5", " 0.500013", "2.5E+01", "7", "-1.25e-3"])).tolist()
+    [0.1, 1e-06, 1.0, 1.0, 1e-05]
+    """
+    text = np.char.lower(np.char.strip(np.asarray(fields, dtype=str)))
+    parts = np.char.partition(text, "e")
+    mantissa, exponent = parts[..., 0], parts[..., 2]
+    dot = np.char.find(mantissa, ".")
+    digits = np.where(dot >= 0, np.char.str_len(mantissa) - dot - 1, 0)
+    try:
+        power = np.where(exponent == "", "0", exponent).astype(np.int64)
+    except (ValueError, OverflowError):  # not numbers: the caller reads them as such
+        return np.array([_step_of(f, ".") for f in text])
+    exponents, index = np.unique(power - digits, return_inverse=True)
+    return np.array([float(f"1e{e}") for e in exponents])[index.reshape(-1)]
 
 
 class TextSource(ColumnSource):
@@ -461,13 +479,17 @@ def open_daq(path: Path, display: str, options: RunOptions) -> DaqFile:
                 f"{display}: time column '{names[time_col]}' in '{unit}'; expected s, ms or us"
             )
         time_factor = _TIME_UNITS[unit]
-    parsed: dict[tuple, np.ndarray] = {}
+    parsed: dict[tuple, tuple] = {}
 
-    def table(columns: tuple) -> np.ndarray:
+    def parse(columns: tuple) -> tuple:
         if columns not in parsed:
             parsed.clear()  # one table at a time
-            parsed[columns] = parse_columns(path, display, dialect, list(columns), encoding, names)
+            parsed[columns] = parse_with_steps(path, display, dialect, list(columns), encoding, names,
+                                               step_column=time_col if time_col in columns else None)
         return parsed[columns]
+
+    def table(columns: tuple) -> np.ndarray:
+        return parse(columns)[0]
 
     def with_time(chans) -> tuple:
         return tuple(sorted({ch.key for ch in chans} | ({time_col} if time_col is not None else set())))
@@ -492,10 +514,10 @@ def open_daq(path: Path, display: str, options: RunOptions) -> DaqFile:
         if time_col is None:
             return None
         cols = with_time(chans)
-        t = table(cols)[:, cols.index(time_col)] * time_factor
-        resolution = _printed_step(path, encoding, dialect, time_col) * time_factor
+        data, steps = parse(cols)
+        t = data[:, cols.index(time_col)] * time_factor
         return rate_from_time(lambda a, b: t[a:b], t.size, f"{display}: time column '{names[time_col]}'",
-                              resolution_s=resolution)
+                              resolution_s=steps * time_factor)
 
     def make_source(chans, dtype):
         cols = with_time(chans)
