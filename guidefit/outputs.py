@@ -135,7 +135,11 @@ def files_read(inputs) -> list[tuple[Path, Path | None]]:
       v7.3): the files its external links, external raw storage and virtual
       dataset sources name, relative to the folder of the file that holds them
       (as :mod:`guidefit.io.hdf5` reads them);
-    * a TDMS file: its ``.tdms_index`` beside it.
+    * a TDMS file: its ``.tdms_index`` beside it;
+    * a guide TOML an input names for itself (``guide`` of a setup, an HDF5
+      recording's root attribute, a CSV recording's ``# guide:`` line, a
+      ``"guide"`` of a JSON input): a name that is a file is read as the
+      guide, as ``--guide`` would be (relative to the working directory).
 
     Only regular files are opened (a FIFO would block); a file that cannot be
     parsed names nothing here (its reader says what is wrong). The HDF5
@@ -178,6 +182,8 @@ def _named_by(path: Path) -> list[Path]:
     suffix = path.suffix.lower()
     if suffix == ".toml":
         return _setup_files(path, info.st_size)
+    if suffix in (".json", ".jsonl", ".csv"):
+        return _guides_in_text(path, suffix)
     named = []
     if suffix == ".tdms" and os.path.isfile(f"{path}_index"):
         named.append(Path(f"{path}_index"))
@@ -199,11 +205,49 @@ def _setup_files(path: Path, size: int) -> list[Path]:
             data = tomllib.load(handle)
     except (OSError, ValueError, RecursionError):  # TOMLDecodeError and UnicodeDecodeError are ValueErrors
         return []
+    named = _guide_file(data.get("guide"))
     runs = data.get("runs")
     if not isinstance(runs, dict):
+        return named
+    return named + [path.parent / run["file"] for run in runs.values()
+                    if isinstance(run, dict) and isinstance(run.get("file"), str) and run["file"]
+                    and "\0" not in run["file"]]
+
+
+def _guide_file(name) -> list[Path]:
+    """``[Path(name)]`` when ``name`` (a guide an input names) is a file: ``load_guide`` reads it."""
+    if not isinstance(name, str) or not name.strip() or "\0" in name:
         return []
-    return [path.parent / run["file"] for run in runs.values()
-            if isinstance(run, dict) and isinstance(run.get("file"), str) and run["file"] and "\0" not in run["file"]]
+    try:
+        return [Path(name)] if os.path.isfile(name) else []
+    except (OSError, ValueError):
+        return []
+
+
+#: the part of a JSON or CSV input looked at for a guide it names (a JSON result holds it near the start)
+_GUIDE_SCAN_BYTES = 64 * 2**20
+
+
+def _guides_in_text(path: Path, suffix: str) -> list[Path]:
+    """Guide files named by ``"guide": "..."`` in a JSON input or ``# guide: ...`` in a CSV recording."""
+    import json
+    import re
+
+    try:
+        with open(path, "rb") as handle:
+            text = handle.read(_GUIDE_SCAN_BYTES if suffix != ".csv" else 2**16).decode("utf-8", "replace")
+    except OSError:
+        return []
+    if suffix == ".csv":
+        names = re.findall(r"(?m)^\s*#\s*guide\s*:\s*(.*?)\s*$", text)
+    else:
+        names = []
+        for literal in set(re.findall(r'"guide"\s*:\s*("(?:[^"\\]|\\.)*")', text)):
+            try:
+                names.append(json.loads(literal))
+            except ValueError:
+                continue
+    return [found for name in names for found in _guide_file(name)]
 
 
 def _is_hdf5(path: Path, size: int) -> bool:
@@ -261,6 +305,9 @@ def _hdf5_files(path: Path, display: str) -> list[str]:
     count = [0]
     try:
         with h5py.File(path, "r") as handle:
+            guide = handle.attrs.get("guide")
+            if isinstance(guide, bytes | str):  # a guide TOML the recording names, as --guide would
+                named += [os.fspath(p) for p in _guide_file(os.fsdecode(guide))]
             if look("/", handle) is None:
                 handle.visititems(look)
     except Exception:  # noqa: BLE001 - a damaged file: its reader reports it

@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import os
 import xml.etree.ElementTree as ET
+from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
@@ -290,3 +291,48 @@ def test_a_master_file_reached_through_a_symbolic_link_names_both_folders(rec, t
         assert code == 2 and f"{out}: is an input of this command (" in err, err
     code, _, err = _cli("frf", "real/master.h5", "--out", "real/data.h5")
     assert "(real/data.h5, read through real/master.h5)" in err, err
+
+
+def test_files_read_finds_a_tdms_index_and_links_after_a_user_block(tmp_path):
+    """A setup's TDMS file brings its .tdms_index; an HDF5 file with a 512-byte user block (MAT v7.3)
+    is still HDF5 (signature at 512) and its external links are followed."""
+    import h5py
+
+    from guidefit.outputs import files_read
+
+    (tmp_path / "test.toml").write_text('[runs.a]\nfile = "a.tdms"\n[runs.b]\nfile = "b.mat"\n[runs.c]\nfile = 3\n')
+    (tmp_path / "a.tdms").write_bytes(b"TDSm")
+    (tmp_path / "a.tdms_index").write_bytes(b"TDSh")
+    with h5py.File(tmp_path / "b.mat", "w", userblock_size=512) as f:
+        f["x"] = h5py.ExternalLink("samples.h5", "/x")
+    with open(tmp_path / "b.mat", "r+b") as fh:
+        fh.write(b"MATLAB 7.3 MAT-file")
+    read = [str(p.relative_to(tmp_path)) for p, _ in files_read([tmp_path / "test.toml"])]
+    assert read == ["test.toml", "a.tdms", "b.mat", "a.tdms_index", "samples.h5"]
+
+
+GUIDE_TOML = (Path(__file__).parents[1] / "guidefit" / "model" / "data" / "MRB35.toml").read_text()
+
+
+@pytest.mark.parametrize("where", ["hdf5 attribute", "setup", "results json"])
+def test_no_output_onto_a_guide_toml_an_input_names(rec, setup_case, where):
+    """A guide name that is a file is read as the guide (as --guide would be): it is an input too."""
+    import h5py
+
+    (setup_case / "my_guide.toml").write_text(GUIDE_TOML)
+    if where == "hdf5 attribute":
+        (setup_case / "rec.h5").write_bytes(rec.read_bytes())
+        with h5py.File(setup_case / "rec.h5", "a") as f:
+            f.attrs["guide"] = "my_guide.toml"
+        args = ("identify", "rec.h5", "--no-jackknife", "--csv", "my_guide.toml")
+    elif where == "setup":
+        text = (setup_case / "test.toml").read_text().replace('guide = "MRB35"', 'guide = "my_guide.toml"')
+        (setup_case / "test.toml").write_text(text)
+        args = ("identify", "test.toml", "--no-jackknife", "--junit", "my_guide.toml")
+    else:
+        (setup_case / "r.jsonl").write_text(json.dumps({**RESULT, "guide": "my_guide.toml"}) + "\n")
+        args = ("export", "r.jsonl", "-o", "my_guide.toml")
+    code, _, err = _cli(*args)
+    assert code == 2, err
+    assert "my_guide.toml: is an input of this command (my_guide.toml, read through " in err, err
+    assert (setup_case / "my_guide.toml").read_text() == GUIDE_TOML
