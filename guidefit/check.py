@@ -32,6 +32,7 @@ Examples
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 
 from guidefit.errors import GuideError
@@ -145,6 +146,24 @@ def check_result(result: dict, spec: CheckSpec) -> list[str]:
     return out
 
 
+#: characters XML 1.0 cannot hold, not even as character references (C0 controls other than
+#: tab and line breaks, lone surrogates of undecodable file names, U+FFFE, U+FFFF)
+_NOT_XML = re.compile("[^\t\n\r\x20-\ud7ff\ue000-\ufffd\U00010000-\U0010ffff]")
+
+
+def xml_text(text: str) -> str:
+    r"""``text`` with each character XML 1.0 cannot hold written as visible ``\xNN`` / ``\uNNNN``.
+
+    >>> xml_text("rec\x01.h5"), xml_text("a\x1b[31m"), xml_text("caf\udce9.h5"), xml_text("tab\tok")
+    ('rec\\x01.h5', 'a\\x1b[31m', 'caf\\udce9.h5', 'tab\tok')
+    """
+    def visible(match) -> str:
+        code = ord(match.group())
+        return f"\\x{code:02x}" if code < 0x100 else f"\\u{code:04x}"
+
+    return _NOT_XML.sub(visible, text)
+
+
 def junit_xml(outcomes: list[tuple[str, list[str], str | None]], path, elapsed_s: float = 0.0) -> None:
     """JUnit XML: one testcase per file; ``outcomes`` = (file, violations, error or None)."""
     import xml.etree.ElementTree as ET
@@ -154,11 +173,12 @@ def junit_xml(outcomes: list[tuple[str, list[str], str | None]], path, elapsed_s
     suite = ET.Element("testsuite", name="guidefit", tests=str(len(outcomes)), failures=str(failures),
                        errors=str(errors), time=f"{elapsed_s:.3f}")
     for file, violations, error in outcomes:
-        case = ET.SubElement(suite, "testcase", classname="guidefit.identify", name=str(file))
+        case = ET.SubElement(suite, "testcase", classname="guidefit.identify", name=xml_text(str(file)))
         if error is not None:
-            ET.SubElement(case, "error", message=error).text = error
+            ET.SubElement(case, "error", message=xml_text(error)).text = xml_text(error)
         elif violations:
-            ET.SubElement(case, "failure", message=violations[0]).text = "\n".join(violations)
+            text = [xml_text(v) for v in violations]
+            ET.SubElement(case, "failure", message=text[0]).text = "\n".join(text)
     root = ET.Element("testsuites", tests=str(len(outcomes)), failures=str(failures), errors=str(errors))
     root.append(suite)
     ET.indent(root)

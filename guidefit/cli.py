@@ -137,7 +137,8 @@ def _guide_file(name):
 
 
 def _refuse(outputs, inputs) -> None:
-    """Exit 2 (one line) before any work when an output would overwrite an input."""
+    """Exit 2 (one line) before any work when an output would overwrite a file the inputs read
+    (a setup's DAQ files and an HDF5 file's linked files included: guidefit.outputs.files_read)."""
     from guidefit.outputs import refuse_inputs
 
     refuse_inputs(outputs, inputs)
@@ -252,7 +253,7 @@ def plan_cmd(setup, guide_name, layout, hit_texts, no_search, as_json, plot_path
     from guidefit import layouts, report
     from guidefit.plan import plan
 
-    _refuse([plot_path], [setup, _guide_file(guide_name)])
+    _refuse([plot_path], [setup, _guide_file(guide_name), _guide_file(layout)])  # a layout TOML too
     _plot_file(plot_path)
     hits = {}
     for text in hit_texts:

@@ -170,6 +170,9 @@ def _finite(value, what: str) -> float:
         number = float(value)
     except (TypeError, ValueError):
         raise ExportError(f"{what}: expected a number, got {value!r}") from None
+    except OverflowError:  # an integer beyond the float range (a caller's dict; files: guidefit.jsonio)
+        raise ExportError(f"{what}: an integer of {len(str(value))} digits is not a finite number; "
+                          "cannot export") from None
     if not math.isfinite(number):
         raise ExportError(f"{what}: {number} is not a finite number; cannot export")
     return number

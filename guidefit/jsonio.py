@@ -1,8 +1,15 @@
-"""Reading JSON result files: one JSON document, or JSON Lines (``identify --json``)."""
+"""Reading JSON result files: one JSON document, or JSON Lines (``identify --json``).
+
+Every number must be a finite float: ``NaN``/``Infinity`` (not JSON, though
+Python writes them; guidefit writes ``null``) and numbers beyond the float
+range (``1e999``, an integer of 400 digits) are refused in one line naming
+the key, not read as ``inf`` or left to fail later as an internal error.
+"""
 
 from __future__ import annotations
 
 import json
+import math
 import stat
 from pathlib import Path
 
@@ -51,7 +58,7 @@ def read_json_documents(path) -> list:
     if not text.strip():
         raise RecordingError(f"{p}: empty file")
     try:
-        return [json.loads(text)]
+        return [_loads(text, f"{p}")]
     except json.JSONDecodeError:
         pass
     except RecursionError:  # the decoder recurses per nesting level
@@ -61,9 +68,71 @@ def read_json_documents(path) -> list:
         if not line.strip():
             continue
         try:
-            docs.append(json.loads(line))
+            docs.append(_loads(line, f"{p}: line {number}"))
         except json.JSONDecodeError as exc:
             raise RecordingError(f"{p}: line {number}: not JSON ({exc.msg})") from None
         except RecursionError:
             raise RecordingError(f"{p}: line {number}: arrays or objects nested too deeply") from None
     return docs
+
+
+class _NotFinite(str):
+    """A number of the JSON text that is no finite float (its text), found after parsing."""
+
+
+def _loads(text: str, where: str):
+    """``json.loads`` with every number a finite float or an int a float can hold.
+
+    Raises :class:`RecordingError` ``"<where>: <key>: <number> is not a finite number (...)"``
+    for ``NaN``, ``Infinity``, ``1e999`` or an integer beyond the float range (Python's
+    4300-digit limit on integer text included).
+
+    >>> _loads('{"a": [1, 2.5]}', "r.json")
+    {'a': [1, 2.5]}
+    >>> try:
+    ...     _loads('{"p": {"K_V": {"value": 1e999}}}', "r.json")
+    ... except RecordingError as exc:
+    ...     print(exc)
+    r.json: p.K_V.value: 1e999 is not a finite number (too large for a float)
+    """
+    found = []
+
+    def number(kind):
+        def parse(token: str):
+            try:
+                value = kind(token) if len(token) <= 4000 else math.inf
+                if not math.isfinite(float(value)):
+                    raise OverflowError
+            except (OverflowError, ValueError):
+                found.append(token)
+                return _NotFinite(token)
+            return value
+        return parse
+
+    def constant(token: str):
+        found.append(token)
+        return _NotFinite(token)
+
+    doc = json.loads(text, parse_float=number(float), parse_int=number(int), parse_constant=constant)
+    if found:
+        key, token = _first_not_finite(doc)
+        shown = token if len(token) <= 24 else f"{token[:12]}...({len(token)} characters)"
+        why = ("not JSON; write null for a missing value" if token in ("NaN", "Infinity", "-Infinity")
+               else "too large for a float")
+        raise RecordingError(f"{where}: {key or 'the document'}: {shown} is not a finite number ({why})")
+    return doc
+
+
+def _first_not_finite(doc, key: str = ""):
+    """(key path such as ``parameters.K_V.value`` or ``modes[2].frequency_hz``, text) of the first
+    :class:`_NotFinite` in ``doc``, or None."""
+    stack = [(key, doc)]
+    while stack:
+        key, item = stack.pop()
+        if isinstance(item, _NotFinite):
+            return key, str(item)
+        if isinstance(item, dict):
+            stack.extend((f"{key}.{k}" if key else str(k), v) for k, v in reversed(item.items()))
+        elif isinstance(item, list):
+            stack.extend((f"{key}[{k}]", v) for k, v in reversed(list(enumerate(item))))
+    return None

@@ -10,8 +10,11 @@ onto the destination's *name*: a symbolic link there is replaced by the new
 file, its target is not written through.
 
 :func:`refuse_inputs` is the guard every command runs before it starts: an
-output that is one of the command's inputs (the same path, a hard link, a
-symbolic link to it) is a one-line :class:`OutputError` (exit 2).
+output that is one of the files the command reads (:func:`files_read`: the
+inputs named on the command line, a test setup's DAQ files, the files an HDF5
+file's external links, external raw storage and virtual datasets name; the
+same path, a hard link, a symbolic link to one of them) is a one-line
+:class:`OutputError` (exit 2), and so are two outputs onto one file.
 
 :func:`install_interrupt_handler` is the command line's Ctrl-C: the main
 thread gets ``KeyboardInterrupt`` (the command unwinds, temporary files are
@@ -34,6 +37,7 @@ from guidefit.errors import GuidefitError
 __all__ = [
     "INTERRUPT_GRACE_S",
     "OutputError",
+    "files_read",
     "handler_installed",
     "install_interrupt_handler",
     "interrupted",
@@ -65,16 +69,19 @@ class OutputError(GuidefitError, ValueError):
 def _same_file(a: Path, b: Path) -> bool:
     try:
         return os.path.samefile(a, b)
-    except OSError:  # one of them does not exist (or cannot be inspected): compare names
-        return os.path.abspath(a) == os.path.abspath(b)
+    except OSError:  # one of them does not exist (or cannot be inspected): compare resolved names
+        return os.path.realpath(a) == os.path.realpath(b)
 
 
 def refuse_inputs(outputs, inputs) -> None:
-    """Raise :class:`OutputError` when an output is one of the inputs, or two outputs are one file.
+    """Raise :class:`OutputError` when an output is a file the inputs read, or two outputs are one file.
 
-    ``outputs`` and ``inputs`` are paths (``None`` entries are ignored). Same
-    file means the same inode (:func:`os.path.samefile`: hard links and
-    symbolic links to an input count), or the same absolute name.
+    ``outputs`` and ``inputs`` are paths (``None`` entries are ignored); every
+    file the inputs read is compared (:func:`files_read`: a setup's DAQ files,
+    an HDF5 file's linked files). Same file means the same inode
+    (:func:`os.path.samefile`: hard links and symbolic links to an input
+    count), or the same resolved name (:func:`os.path.realpath`) where one of
+    them does not exist. Nothing is resolved when there is no output.
 
     Examples
     --------
@@ -89,18 +96,223 @@ def refuse_inputs(outputs, inputs) -> None:
     ...         print(str(exc).split(": ", 1)[1].split(" (")[0])
     is an input of this command
     """
-    ins = [Path(p) for p in inputs if p is not None]
-    outs = [Path(p) for p in outputs if p is not None]
+    outs = [Path(os.fspath(p)) for p in outputs if p is not None]
+    if not outs:
+        return
     for k, out in enumerate(outs):
-        for src in ins:
-            if _same_file(out, src):
-                raise OutputError(f"{out}: is an input of this command ({src}); choose another output file")
         for other in outs[:k]:  # two outputs onto one file: the second would replace the first
             if _same_file(out, other):
                 raise OutputError(f"{out}: is given for two outputs of this command ({other}); "
                                   "choose different files")
+    read = files_read(inputs)
+    for out in outs:
+        for src, reader in read:
+            if _same_file(out, src):
+                through = f", read through {reader}" if reader is not None else ""
+                raise OutputError(f"{out}: is an input of this command ({src}{through}); choose another output file")
 
 
+# ------------------------------------------------------------------ what the inputs read
+
+#: at most this many files are followed from a command's inputs (links of links of ...)
+MAX_FILES_READ = 4096
+#: at most this many objects of one HDF5 file are looked at for links to other files
+MAX_HDF5_OBJECTS = 100_000
+#: a TOML input larger than this is not parsed for a setup's runs (readers cap their own inputs)
+MAX_SETUP_BYTES = 16 * 2**20
+
+_HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+
+
+def files_read(inputs) -> list[tuple[Path, Path | None]]:
+    """Every file reading ``inputs`` may read: ``(path, the file that names it or None)``.
+
+    Each input, and what it names, followed to any depth (each file once):
+
+    * a TOML file with a ``[runs.<name>]`` table (a test setup,
+      ``test-setup-format.md``): each run's ``file``, relative to the setup;
+    * an HDF5 file (by its signature: contract recordings, ``frf.h5``, MAT
+      v7.3): the files its external links, external raw storage and virtual
+      dataset sources name, relative to the folder of the file that holds them
+      (as :mod:`guidefit.io.hdf5` reads them);
+    * a TDMS file: its ``.tdms_index`` beside it;
+    * a guide TOML an input names for itself (``guide`` of a setup, an HDF5
+      recording's root attribute, a CSV recording's ``# guide:`` line, a
+      ``"guide"`` of a JSON input): a name that is a file is read as the
+      guide, as ``--guide`` would be (relative to the working directory).
+
+    Only regular files are opened (a FIFO would block); a file that cannot be
+    parsed names nothing here (its reader says what is wrong). The HDF5
+    metadata is read under the reader's deadline
+    (:func:`guidefit.io.watchdog.call_guarded`): a damaged file that makes the
+    HDF5 library loop is the reader's one-line error, not a hang.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     setup = pathlib.Path(folder) / "test.toml"
+    ...     _ = setup.write_text('[runs.vertical]\\nfile = "vertical.csv"\\n')
+    ...     print([(p.name, r and r.name) for p, r in files_read([setup, None])])
+    [('test.toml', None), ('vertical.csv', 'test.toml')]
+    """
+    queue = [(Path(os.fspath(p)), None) for p in inputs if p is not None]
+    seen, found = set(), []
+    while queue and len(found) < MAX_FILES_READ:
+        path, reader = queue.pop(0)
+        key = os.path.realpath(path)
+        if key in seen:
+            continue
+        seen.add(key)
+        found.append((path, reader))
+        queue.extend((named, path) for named in _named_by(path))
+    return found
+
+
+def _named_by(path: Path) -> list[Path]:
+    """The files the regular file ``path`` makes its reader read (none for another file)."""
+    import stat
+
+    try:
+        info = os.stat(path)
+    except (OSError, ValueError):
+        return []
+    if not stat.S_ISREG(info.st_mode):
+        return []
+    suffix = path.suffix.lower()
+    if suffix == ".toml":
+        return _setup_files(path, info.st_size)
+    if suffix in (".json", ".jsonl", ".csv"):
+        return _guides_in_text(path, suffix)
+    named = []
+    if suffix == ".tdms" and os.path.isfile(f"{path}_index"):
+        named.append(Path(f"{path}_index"))
+    if _is_hdf5(path, info.st_size):
+        from guidefit.io.watchdog import call_guarded
+
+        named += [Path(p) for p in call_guarded(_hdf5_files, path, os.fspath(path))]
+    return named
+
+
+def _setup_files(path: Path, size: int) -> list[Path]:
+    """The runs' files of a test setup (TOML that cannot be read names nothing)."""
+    import tomllib
+
+    if size > MAX_SETUP_BYTES:
+        return []
+    try:
+        with open(path, "rb") as handle:
+            data = tomllib.load(handle)
+    except (OSError, ValueError, RecursionError):  # TOMLDecodeError and UnicodeDecodeError are ValueErrors
+        return []
+    named = _guide_file(data.get("guide"))
+    runs = data.get("runs")
+    if not isinstance(runs, dict):
+        return named
+    return named + [path.parent / run["file"] for run in runs.values()
+                    if isinstance(run, dict) and isinstance(run.get("file"), str) and run["file"]
+                    and "\0" not in run["file"]]
+
+
+def _guide_file(name) -> list[Path]:
+    """``[Path(name)]`` when ``name`` (a guide an input names) is a file: ``load_guide`` reads it."""
+    if not isinstance(name, str) or not name.strip() or "\0" in name:
+        return []
+    try:
+        return [Path(name)] if os.path.isfile(name) else []
+    except (OSError, ValueError):
+        return []
+
+
+#: the part of a JSON or CSV input looked at for a guide it names (a JSON result holds it near the start)
+_GUIDE_SCAN_BYTES = 64 * 2**20
+
+
+def _guides_in_text(path: Path, suffix: str) -> list[Path]:
+    """Guide files named by ``"guide": "..."`` in a JSON input or ``# guide: ...`` in a CSV recording."""
+    import json
+    import re
+
+    try:
+        with open(path, "rb") as handle:
+            text = handle.read(_GUIDE_SCAN_BYTES if suffix != ".csv" else 2**16).decode("utf-8", "replace")
+    except OSError:
+        return []
+    if suffix == ".csv":
+        names = re.findall(r"(?m)^\s*#\s*guide\s*:\s*(.*?)\s*$", text)
+    else:
+        names = []
+        for literal in set(re.findall(r'"guide"\s*:\s*("(?:[^"\\]|\\.)*")', text)):
+            try:
+                names.append(json.loads(literal))
+            except ValueError:
+                continue
+    return [found for name in names for found in _guide_file(name)]
+
+
+def _is_hdf5(path: Path, size: int) -> bool:
+    """The HDF5 signature at offset 0, 512, 1024, 2048, ... (after a user block, as in MAT v7.3)."""
+    try:
+        with open(path, "rb") as handle:
+            offset = 0
+            while offset + len(_HDF5_SIGNATURE) <= size:
+                handle.seek(offset)
+                if handle.read(len(_HDF5_SIGNATURE)) == _HDF5_SIGNATURE:
+                    return True
+                offset = 512 if offset == 0 else 2 * offset
+    except OSError:
+        return False
+    return False
+
+
+def _hdf5_files(path: Path, display: str) -> list[str]:
+    """The files an HDF5 file names: external links, external raw storage, virtual dataset sources.
+
+    Relative names are taken in the folder of the file as named and, where it
+    differs, as resolved (HDF5 and :mod:`guidefit.io.hdf5` look there). Errors
+    of a damaged file end the search with what was found.
+    """
+    import h5py
+
+    named: list[str] = []
+
+    def near(name) -> None:
+        name = os.fsdecode(name)
+        if os.path.isabs(name):
+            named.append(name)
+            return
+        named.append(os.path.join(os.path.dirname(os.fspath(path)), name))  # as the reader names it
+        real = os.path.join(os.path.dirname(os.path.realpath(path)), name)
+        if os.path.realpath(named[-1]) != os.path.realpath(real):  # the file reached through a symbolic link
+            named.append(real)
+
+    def look(name, obj):
+        if isinstance(obj, h5py.Group):
+            for key in obj:
+                link = obj.get(key, getlink=True)
+                if isinstance(link, h5py.ExternalLink):
+                    near(link.filename)
+        elif isinstance(obj, h5py.Dataset):
+            for file_name, _, _ in obj.external or ():
+                near(file_name)
+            if obj.is_virtual:
+                for source in obj.virtual_sources():
+                    if source.file_name != ".":
+                        near(source.file_name)
+        count[0] += 1
+        return True if count[0] > MAX_HDF5_OBJECTS else None
+
+    count = [0]
+    try:
+        with h5py.File(path, "r") as handle:
+            guide = handle.attrs.get("guide")
+            if isinstance(guide, bytes | str):  # a guide TOML the recording names, as --guide would
+                named += [os.fspath(p) for p in _guide_file(os.fsdecode(guide))]
+            if look("/", handle) is None:
+                handle.visititems(look)
+    except Exception:  # noqa: BLE001 - a damaged file: its reader reports it
+        pass
+    return named
 def _temp_name(p: Path) -> tuple[int, Path]:
     """A new temporary file beside ``p`` with the same suffix (writers choose formats by suffix)."""
     import tempfile

@@ -409,6 +409,24 @@ def _check_external(ds, recording: Path, holder: str, where: str) -> None:
         )
 
 
+def _source_short(source, src) -> bool:
+    """True when the dataset ``src`` is smaller than the part of it a virtual source maps.
+
+    A source mapped whole (``layout[...] = VirtualSource(...)``: an "all" selection,
+    which h5py reads back without bounds) must hold as many values as the virtual
+    selection it fills.
+    """
+    import h5py
+
+    space = source.src_space
+    if space.get_select_type() == h5py.h5s.SEL_ALL:
+        return int(np.prod(src.shape, dtype=np.int64)) < int(source.vspace.get_select_npoints())
+    if space.get_select_npoints() == 0:
+        return False
+    _, end = space.get_select_bounds()
+    return len(end) != src.ndim or any(e >= n for e, n in zip(end, src.shape))
+
+
 def _check_virtual(ds, recording: Path, holder: str, where: str, depth: int) -> None:
     import h5py
 
@@ -437,13 +455,11 @@ def _check_virtual(ds, recording: Path, holder: str, where: str, depth: int) -> 
                 raise RecordingError(
                     f"{where}: {what} is missing; HDF5 would read it as fill values"
                 ) from None
-            if source.src_space.get_select_npoints() > 0:
-                _, end = source.src_space.get_select_bounds()
-                if len(end) != src.ndim or any(e >= n for e, n in zip(end, src.shape)):
-                    raise RecordingError(
-                        f"{where}: {what} has shape {src.shape}, smaller than the part mapped "
-                        "from it; HDF5 would read the rest as fill values"
-                    )
+            if _source_short(source, src):
+                raise RecordingError(
+                    f"{where}: {what} has shape {src.shape}, smaller than the part mapped "
+                    "from it; HDF5 would read the rest as fill values"
+                )
             _check_storage(src, recording, where, depth + 1)
         finally:
             if close:

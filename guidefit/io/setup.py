@@ -65,7 +65,6 @@ Examples
 
 from __future__ import annotations
 
-import contextlib
 import difflib
 import math
 import os
@@ -668,12 +667,6 @@ def read_setup(p: Path, display: str) -> Recording:
 # ---------------------------------------------------------------- converting
 
 
-def _same_file(a: Path, b: Path) -> bool:
-    with contextlib.suppress(OSError):
-        return os.path.samefile(a, b)
-    return a.resolve() == b.resolve()
-
-
 def convert(path, out, *, compression: str | None = None) -> Recording:
     """Write any recording (a test setup, or a file of any readable format) to the recording contract.
 
@@ -699,26 +692,19 @@ def convert(path, out, *, compression: str | None = None) -> Recording:
     Raises
     ------
     RecordingError
-        Bad input, an output format that cannot hold it, or ``out`` is one of
-        the inputs (the setup or a run's DAQ file): refused before anything is written.
+        Bad input, or an output format that cannot hold it.
+    guidefit.outputs.OutputError
+        ``out`` is a file the input reads (the setup, a run's DAQ file, a file an
+        HDF5 recording links to; :func:`guidefit.outputs.refuse_inputs`): refused
+        before anything is read or written.
     """
     from guidefit.io.registry import format_for, read_recording, write_recording
+    from guidefit.outputs import refuse_inputs
 
     out_display = os.fspath(out)
-    target = Path(out_display)
-
-    def refuse_inputs(inputs):
-        if target.exists():
-            for item in inputs:
-                if _same_file(item, target):
-                    raise RecordingError(
-                        f"{out_display}: is an input ({os.fspath(item)}); refusing to write onto it"
-                    )
-
-    refuse_inputs([Path(os.fspath(path))])
+    refuse_inputs([out_display], [os.fspath(path)])
     format_for(out_display, "recording", "write")  # an unknown output type fails before any reading
     recording = read_recording(path)
-    refuse_inputs([Path(run.file) for run in recording.runs if run.file])
     write_recording(out_display, recording, compression=compression)
     return recording
 
