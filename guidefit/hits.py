@@ -334,7 +334,7 @@ class _RowsHit(Hit):
     def data(self):
         data = self.__dict__.get("_data")
         if data is None and self.__dict__.get("_rows") is not None:
-            data = np.ascontiguousarray(self._rows.T)
+            data = np.ascontiguousarray(self._rows.T, dtype=np.float64)  # rows may be float32 (exact values)
             data.setflags(write=False)
             object.__setattr__(self, "_data", data)
         return data
@@ -468,8 +468,9 @@ def _check_raw(
 ) -> Hit:
     """Assess a stored hit read as stored (``raw``: (n, C), file units and dtype).
 
-    The samples are converted once, to float64 SI channel rows in ``rows``
-    (C, n): the layout the checks and the FFT work on. An accepted hit keeps
+    The samples are converted once, to SI channel rows in ``rows`` (C, n):
+    the layout the checks and the FFT work on; float32 when the stored
+    samples are float32 and need no scaling (the same values), else float64. An accepted hit keeps
     them (its ``data`` is their transpose, made if asked for). ``scale`` is
     ``run.scale_to_si``, or None when every factor is 1; the values are those
     of :func:`guidefit.recording.read_hit`.
@@ -525,7 +526,7 @@ def _assess(data, run: Run, s: HitSettings, pre: int | None, median_peak, force_
 
 def _assess_rows(columns, run: Run, s: HitSettings, pre: int | None, median_peak, force_base=None,
                  extremes=None):
-    """:func:`_assess` of the channel rows ``columns`` (C, n), float64 SI (``extremes``: their
+    """:func:`_assess` of the channel rows ``columns`` (C, n), SI, float64 or float32 (``extremes``: their
     max and min per row, if known)."""
     names = run.channel_names
     fs = run.sample_rate_hz
@@ -536,9 +537,10 @@ def _assess_rows(columns, run: Run, s: HitSettings, pre: int | None, median_peak
     tops, bottoms = extremes if extremes is not None else (columns.max(axis=1), columns.min(axis=1))
     # a sample beyond +-1e100 (a corrupt one: no force or acceleration comes near) would overflow the spectra
     if not (np.all(np.abs(tops) < _ABSURD_SAMPLE) and np.all(np.abs(bottoms) < _ABSURD_SAMPLE)):
-        finite = np.abs(columns) < _ABSURD_SAMPLE  # False for NaN too
+        # False for NaN too (every finite float32 is below 1e100)
+        finite = np.isfinite(columns) if columns.dtype == np.float32 else np.abs(columns) < _ABSURD_SAMPLE
         bad = [names[c] for c in np.flatnonzero(~finite.all(axis=1))]
-        force = columns[fi][finite[fi]]
+        force = columns[fi][finite[fi]].astype(np.float64, copy=False)  # a rare hit: float64 arithmetic
         peak = _signed_extreme(force - np.median(force)) if force.size else math.nan
         count = int((~finite).sum())
         return (
@@ -690,6 +692,8 @@ def _median(x: np.ndarray):
     partitioned. Where the bracket misses, ``np.median`` itself is used.
     """
     n = x.size
+    if n < 8192 and x.dtype != np.float64:  # float32 rows: the median float64 arithmetic gives
+        return _median_exact(x)
     if n < 8192:
         if n == 0:
             return np.median(x)
@@ -707,13 +711,27 @@ def _median(x: np.ndarray):
     lo, hi = np.partition(sample, edges)[list(edges)]
     below = int(np.count_nonzero(x < lo))
     if below > ranks[0]:
-        return np.median(x)
+        return np.median(x) if x.dtype == np.float64 else _median_exact(x)
     band = x[(x >= lo) & (x <= hi)]
     if below + band.size <= ranks[-1] or band.size > n // 4:
-        return np.median(x)
+        return np.median(x) if x.dtype == np.float64 else _median_exact(x)
     kth = [r - below for r in ranks]
     part = np.partition(band, kth)
-    return np.mean(part[kth[0] : kth[-1] + 1])  # as np.median: the mean of the middle one or two
+    # as np.median: the mean of the middle one or two (in float64 for float32 rows)
+    return np.mean(part[kth[0] : kth[-1] + 1], dtype=np.float64)
+
+
+def _median_exact(x: np.ndarray) -> np.float64:
+    """``np.median(x.astype(float64))`` of float32 samples without the float64 copy: the middle
+    order statistics are exact float32 values; only their mean needs float64."""
+    n = x.size
+    if n == 0:
+        return np.float64(np.nan)
+    k = n // 2
+    if n % 2:
+        return np.float64(np.partition(x, k)[k])
+    part = np.partition(x, (k - 1, k))
+    return (np.float64(part[k - 1]) + np.float64(part[k])) / 2
 
 
 def _signed_extreme(x: np.ndarray) -> float:
@@ -1070,6 +1088,9 @@ def _stored_hits(run: Run, s: HitSettings, length: int) -> Iterator[Hit]:
     scale = scale if np.any(scale != 1.0) else None
     with open_reader(run) as reader:
         n_channels = run.n_channels
+        # float32 samples that need no scaling stay float32 in the rows: the same values, half the memory
+        # traffic of every check and of the windowing (a tenth of identify's time); else float64 SI
+        rows_dtype = np.float32 if scale is None and np.dtype(reader.dtype) == np.float32 else np.float64
         cache = None
         if n_hits * length * n_channels * 8 <= _CACHE_BYTES:
             cache = reader.read_hits_raw(0, n_hits, length)
@@ -1121,7 +1142,7 @@ def _stored_hits(run: Run, s: HitSettings, length: int) -> Iterator[Hit]:
                 unknown = first_read - i - 1  # hits whose force has not been read
                 bound = _median_upper_bound(ordered, unknown) if unknown > 0 else None
                 if bound is not None and math.isfinite(bound):
-                    hit = _check_raw(run, raw, _rows_buffer(spare, (n_channels, length)), scale, s,
+                    hit = _check_raw(run, raw, _rows_buffer(spare, (n_channels, length), rows_dtype), scale, s,
                                      i, pre, bound, bases[i])
                     if "too_weak" not in hit.codes:
                         yield hit
@@ -1129,22 +1150,22 @@ def _stored_hits(run: Run, s: HitSettings, length: int) -> Iterator[Hit]:
                     del hit
                 force_pass(i + 1, first_read)  # the rest of the force (if any): the exact median
                 median, exact = exact_median(), True
-            yield _check_raw(run, raw, _rows_buffer(spare, (n_channels, length)), scale, s, i,
+            yield _check_raw(run, raw, _rows_buffer(spare, (n_channels, length), rows_dtype), scale, s, i,
                              pre, median, bases[i])
 
 
-def _rows_buffer(spare: list, shape: tuple[int, int]) -> np.ndarray:
-    """A float64 array of ``shape`` for a hit's rows: one of ``spare`` that only
+def _rows_buffer(spare: list, shape: tuple[int, int], dtype=np.float64) -> np.ndarray:
+    """An array of ``shape`` and ``dtype`` for a hit's rows: one of ``spare`` that only
     ``spare`` still references (its Hit and every view of it are gone), else a
     new one, kept in ``spare`` (at most 3). Reusing memory that is already
     mapped saves first-touch page faults: a new 4 MB array costs about 1000."""
     import sys
 
     for rows in spare:
-        if sys.getrefcount(rows) == 3:  # ``spare``, ``rows`` and the argument
+        if sys.getrefcount(rows) == 3 and rows.dtype == dtype:  # ``spare``, ``rows`` and the argument
             rows.setflags(write=True)
             return rows
-    rows = np.empty(shape)
+    rows = np.empty(shape, dtype=dtype)
     if len(spare) < 3:
         spare.append(rows)
     return rows

@@ -719,8 +719,8 @@ def _assert_same_hits(got, want):
         assert g[:6] == w[:6]
         np.testing.assert_array_equal(g[6], w[6])  # peak (NaN equal to NaN)
         assert g[7].keys() == w[7].keys()
-        for key in g[7]:
-            np.testing.assert_array_equal(g[7][key], w[7][key])
+        for key in g[7]:  # float32 samples are checked in float32: the metrics within its rounding
+            np.testing.assert_allclose(g[7][key], w[7][key], rtol=1e-6, equal_nan=True)
         if w[8] is None:
             assert g[8] is None
         else:
