@@ -455,7 +455,7 @@ def _nonlinear_contacts(base, guide, preload_factor: float):
         g = np.hstack([g, -g_body[:, free]])
     k_r = rollers.stiffness_n_per_m
     k_ground = k_lin - (g * k_r[:, None]).T @ g
-    # the roller law of the static model, Q = C delta^(10/9), calibrated ('nominal') so that
+    # the element law of the static model, Q = C delta^e (e = 10/9 rollers, 3/2 balls), calibrated ('nominal') so that
     # dQ/ddelta = K_n at the guide's preload; each roller scaled to its own linear stiffness
     k_nominal = guide.roller_stiffness_n_per_m * guide.effective_roller_fraction
     c = static.contact_constant(guide, "nominal") * k_r / k_nominal
@@ -464,11 +464,12 @@ def _nonlinear_contacts(base, guide, preload_factor: float):
     contacts = _Contacts(
         G=g, C=c, delta0=np.full(len(k_r), preload), K_ground=k_ground, M=m, M_inv=np.linalg.inv(m),
         C_damp=np.zeros((n, n)), K_lin=np.zeros((n, n)), q0=np.zeros(n), preload_m=preload,
-        exponent=static.EXPONENT,
+        exponent=static.exponent(guide),
     )
     q0 = _static_equilibrium(contacts)
     d0 = contacts.delta0 - g @ q0
-    k_tan = static.EXPONENT * c * np.maximum(d0, 0.0) ** (static.EXPONENT - 1.0)
+    e = static.exponent(guide)
+    k_tan = e * c * np.maximum(d0, 0.0) ** (e - 1.0)
     spec = vib.with_roller_stiffness(base, k_tan)
     contacts = replace(contacts, q0=q0, K_lin=contacts.tangent(q0))
     return contacts, spec
