@@ -103,6 +103,7 @@ from pathlib import Path
 import numpy as np
 
 from guidefit.errors import ModelError
+from guidefit.model.guides import guide_reference
 from guidefit.layouts import DEFAULT_RUNS, HammerRun
 
 #: Modal damping ratio per mode label: the paper's identified values (Eq. 26, 28:
@@ -994,7 +995,7 @@ def simulate(guide, effects=(), config: SimulationConfig | None = None, seed: in
             data = np.stack(blocks) if config.layout == "hits" else np.concatenate(blocks)
             runs.append(_run_data(config, model.guide, run, data))
             runs_truth[run.name] = _run_truth(run, hits_truth)
-    recording = RecordingData(runs=tuple(runs), guide=guide.name, description=_description(seed))
+    recording = RecordingData(runs=tuple(runs), guide=guide_reference(guide), description=_description(seed))
     return recording, _truth(model, config, seed, runs_truth, faults)
 
 
@@ -1123,7 +1124,7 @@ def _stream_h5(path: Path, guide, effects, config, seed: int, progress: bool) ->
     with _progress(progress, len(config.runs) * config.hits) as tick:
         for k, run in enumerate(config.runs):
             hits_truth: list = []
-            with open_signals_writer(path, _run_data(config, guide, run), guide=guide.name,
+            with open_signals_writer(path, _run_data(config, guide, run), guide=guide_reference(guide),
                                      description=_description(seed), mode="w" if k == 0 else "a",
                                      dtype=np.float32, compression="gzip") as writer:
                 for block in _iter_run(model, config, run, seed, faults, hits_truth, tick):

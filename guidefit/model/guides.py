@@ -218,6 +218,20 @@ class Guide:
         return pd.DataFrame(rows, columns=["field", "value"])
 
 
+def guide_reference(guide: Guide) -> str:
+    """How a file names its guide: the catalogue name, or the absolute path of the user's guide TOML.
+
+    Recordings written by ``guidefit simulate --guide FILE.toml`` carry this, so that
+    ``identify`` and ``explain`` find the guide again without ``--guide``.
+
+    >>> guide_reference(load_guide("MRB35"))
+    'MRB35'
+    """
+    if guide.source == "builtin" or not Path(guide.source).is_file():
+        return guide.name
+    return str(Path(guide.source).resolve())
+
+
 def builtin_guides() -> list[str]:
     """Names of the guides shipped with guidefit.
 
