@@ -103,8 +103,8 @@ from pathlib import Path
 import numpy as np
 
 from guidefit.errors import ModelError
-from guidefit.model.guides import guide_reference
 from guidefit.layouts import DEFAULT_RUNS, HammerRun
+from guidefit.model.guides import guide_reference
 
 #: Modal damping ratio per mode label: the paper's identified values (Eq. 26, 28:
 #: c_V = 2750 N s/m and c_H = 3109 N s/m give 2.88 % and 10.5 %) for the vertical

@@ -212,8 +212,9 @@ def hamrock_brewe(ry_over_rx: float) -> tuple[float, float, float]:
     ``k = 1.0339 (Ry/Rx)^0.6360``, ``E = 1.0003 + 0.5968 Rx/Ry``,
     ``K = 1.5277 + 0.6023 ln(Ry/Rx)`` (B. J. Hamrock, D. E. Brewe, "Simplified
     solution for stresses and deformations", J. Lubr. Technol. 105 (1983)
-    171-177; Hamrock, NASA RP-1255, Eq. 6.xx). Kept for comparison only: the
-    model uses the exact :func:`point_contact`; the tests show their error.
+    171-177; Hamrock, NASA RP-1255, ch. 6). Kept for comparison only: the
+    model uses the exact :func:`point_contact`; the tests show their error
+    (k within 3.5 % for conformity >= 0.51, 6 % off at 0.505, where Ry/Rx > 100).
     """
     r = float(ry_over_rx)
     return 1.0339 * r**0.6360, 1.5277 + 0.6023 * math.log(r), 1.0003 + 0.5968 / r
