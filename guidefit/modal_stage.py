@@ -283,7 +283,10 @@ def _assemble_in(basis, constants, sensors, drive, runs, iterations):
         for r in runs:
             y = Sb[r] @ a
             den = float(y @ y)
-            scale[r] = float(y @ constants[r]) / den if den > 0 else 0.0
+            # a run whose sensors read only rounding error of this motion has no scale (dividing by
+            # that round-off gave it ~1e13 and let it drown the runs that do see the mode)
+            floor = (1e-9 * float(np.linalg.norm(Sb[r])) * float(np.linalg.norm(a))) ** 2
+            scale[r] = float(y @ constants[r]) / den if den > floor else 0.0
         A = np.vstack([scale[r] * Sb[r] for r in runs])
         b = np.concatenate([constants[r] for r in runs])
         a_new = np.linalg.lstsq(A, b, rcond=1e-8)[0]

@@ -104,6 +104,7 @@ import numpy as np
 
 from guidefit.errors import ModelError
 from guidefit.layouts import DEFAULT_RUNS, HammerRun
+from guidefit.model.guides import guide_reference
 
 #: Modal damping ratio per mode label: the paper's identified values (Eq. 26, 28:
 #: c_V = 2750 N s/m and c_H = 3109 N s/m give 2.88 % and 10.5 %) for the vertical
@@ -455,7 +456,7 @@ def _nonlinear_contacts(base, guide, preload_factor: float):
         g = np.hstack([g, -g_body[:, free]])
     k_r = rollers.stiffness_n_per_m
     k_ground = k_lin - (g * k_r[:, None]).T @ g
-    # the roller law of the static model, Q = C delta^(10/9), calibrated ('nominal') so that
+    # the element law of the static model, Q = C delta^e (e = 10/9 rollers, 3/2 balls), calibrated ('nominal') so that
     # dQ/ddelta = K_n at the guide's preload; each roller scaled to its own linear stiffness
     k_nominal = guide.roller_stiffness_n_per_m * guide.effective_roller_fraction
     c = static.contact_constant(guide, "nominal") * k_r / k_nominal
@@ -464,11 +465,12 @@ def _nonlinear_contacts(base, guide, preload_factor: float):
     contacts = _Contacts(
         G=g, C=c, delta0=np.full(len(k_r), preload), K_ground=k_ground, M=m, M_inv=np.linalg.inv(m),
         C_damp=np.zeros((n, n)), K_lin=np.zeros((n, n)), q0=np.zeros(n), preload_m=preload,
-        exponent=static.EXPONENT,
+        exponent=static.exponent(guide),
     )
     q0 = _static_equilibrium(contacts)
     d0 = contacts.delta0 - g @ q0
-    k_tan = static.EXPONENT * c * np.maximum(d0, 0.0) ** (static.EXPONENT - 1.0)
+    e = static.exponent(guide)
+    k_tan = e * c * np.maximum(d0, 0.0) ** (e - 1.0)
     spec = vib.with_roller_stiffness(base, k_tan)
     contacts = replace(contacts, q0=q0, K_lin=contacts.tangent(q0))
     return contacts, spec
@@ -993,7 +995,7 @@ def simulate(guide, effects=(), config: SimulationConfig | None = None, seed: in
             data = np.stack(blocks) if config.layout == "hits" else np.concatenate(blocks)
             runs.append(_run_data(config, model.guide, run, data))
             runs_truth[run.name] = _run_truth(run, hits_truth)
-    recording = RecordingData(runs=tuple(runs), guide=guide.name, description=_description(seed))
+    recording = RecordingData(runs=tuple(runs), guide=guide_reference(guide), description=_description(seed))
     return recording, _truth(model, config, seed, runs_truth, faults)
 
 
@@ -1122,7 +1124,7 @@ def _stream_h5(path: Path, guide, effects, config, seed: int, progress: bool) ->
     with _progress(progress, len(config.runs) * config.hits) as tick:
         for k, run in enumerate(config.runs):
             hits_truth: list = []
-            with open_signals_writer(path, _run_data(config, guide, run), guide=guide.name,
+            with open_signals_writer(path, _run_data(config, guide, run), guide=guide_reference(guide),
                                      description=_description(seed), mode="w" if k == 0 else "a",
                                      dtype=np.float32, compression="gzip") as writer:
                 for block in _iter_run(model, config, run, seed, faults, hits_truth, tick):

@@ -37,6 +37,8 @@ _UNIT_FACTORS = {
     "kg_m2": {"kg m^2": 1.0, "kg*m^2": 1.0, "kg m2": 1.0, "kg mm^2": 1e-6, "g mm^2": 1e-9},
     "deg": {"deg": 1.0, "rad": 180.0 / math.pi},
     "n_per_m": {"N/m": 1.0, "N/um": 1e6, "N/µm": 1e6, "N/mm": 1e3},
+    "n": {"N": 1.0, "kN": 1e3},
+    "pa": {"Pa": 1.0, "MPa": 1e6, "GPa": 1e9},
 }
 
 # Field specification: section -> field -> (unit key or None, kind, required).
@@ -58,15 +60,36 @@ _SPEC: dict[str, dict[str, tuple]] = {
         "rollers_per_row": (None, "int", True),
         "roller_span_m": ("m", "nonneg", True),
         "effective_roller_fraction": (None, "frac", False),
+        "row_count": (None, "int", False),
+        "groove": (None, ("circular_arc", "gothic_arch"), False),
     },
     "contact": {
+        "contact_type": (None, ("roller", "ball"), False),
         "roller_stiffness_n_per_m": ("n_per_m", "pos", True),
         "roller_diameter_m": ("m", "pos", False),
         "roller_length_m": ("m", "pos", False),
+        "ball_diameter_m": ("m", "pos", False),
+        "conformity_rail": (None, "pos", False),
+        "conformity_carriage": (None, "pos", False),
+        "element_modulus_pa": ("pa", "pos", False),
+        "element_poisson": (None, "pos", False),
+        "raceway_modulus_pa": ("pa", "pos", False),
+        "raceway_poisson": (None, "pos", False),
         "preload_m": ("m", "nonneg", False),
-        "contact_law": (None, ("palmgren",), False),
+        "preload_n": ("n", "nonneg", False),
+        "preload_class": (None, ("Z0", "ZA", "ZB"), False),
+        "dynamic_load_rating_n": ("n", "pos", False),
+        "contact_law": (None, ("palmgren", "hertz_point"), False),
     },
 }
+# Keys a ball guide may spell by the element: [rows] elements_per_row / element_span_m are
+# rollers_per_row / roller_span_m (the count and span of the rolling elements, balls or rollers).
+_ALIASES = {"rows": {"elements_per_row": "rollers_per_row", "element_span_m": "roller_span_m"}}
+#: Preload classes as fractions of the dynamic load rating C: the middle of HIWIN's ranges
+#: (Z0 very light 0-0.02 C, ZA medium 0.05-0.07 C, ZB heavy 0.10-0.12 C).
+PRELOAD_CLASSES = {"Z0": 0.01, "ZA": 0.06, "ZB": 0.11}
+#: Steel (balls, rollers and raceways): Young's modulus (Pa) and Poisson's ratio.
+STEEL = (2.1e11, 0.3)
 _TOP_LEVEL = {"name", "description", "carriage", "rows", "contact", "points"}
 _DEFAULTS = {
     "center_of_mass_m": (0.0, 0.0, 0.0),
@@ -76,7 +99,20 @@ _DEFAULTS = {
     "roller_diameter_m": None,
     "roller_length_m": None,
     "preload_m": 0.0,
-    "contact_law": "palmgren",
+    "contact_law": None,
+    "row_count": 4,
+    "groove": None,
+    "contact_type": "roller",
+    "ball_diameter_m": None,
+    "conformity_rail": None,
+    "conformity_carriage": None,
+    "element_modulus_pa": STEEL[0],
+    "element_poisson": STEEL[1],
+    "raceway_modulus_pa": STEEL[0],
+    "raceway_poisson": STEEL[1],
+    "preload_n": None,
+    "preload_class": None,
+    "dynamic_load_rating_n": None,
 }
 
 
@@ -86,7 +122,14 @@ class Guide:
 
     All quantities SI. Row geometry follows the paper's Eq. (9): rows 1, 2 at
     depth ``h1_m`` below the load point, rows 3, 4 at ``h3_m = h1_m + h0_m``,
-    laterally at ``-/+ row_offset_m``.
+    laterally at ``-/+ row_offset_m``. A two-row ball guide (``row_count`` 2,
+    gothic-arch grooves, four contact points per ball) is the same four contact
+    lines with ``h0_m = 0``: rows 1 and 3 are the upper and lower contacts of the
+    left ball row, rows 2 and 4 of the right one. For ball guides the
+    ``roller_*`` fields hold the balls (``rollers_per_row`` balls per row,
+    ``roller_diameter_m`` the ball diameter) and ``roller_stiffness_n_per_m`` is
+    the ball's K_n at the preload from Eq. (3) unless the file gives it.
+    See docs/guide-toml.md.
     """
 
     name: str
@@ -110,6 +153,28 @@ class Guide:
     contact_law: str
     measuring_points_m: dict[str, tuple[float, float, float]] = field(default_factory=dict)
     source: str = "builtin"
+    contact_type: str = "roller"
+    row_count: int = 4
+    groove: str | None = None
+    conformity_rail: float | None = None
+    conformity_carriage: float | None = None
+    element_modulus_pa: float = STEEL[0]
+    element_poisson: float = STEEL[1]
+    raceway_modulus_pa: float = STEEL[0]
+    raceway_poisson: float = STEEL[1]
+    preload_n: float | None = None
+    preload_class: str | None = None
+    dynamic_load_rating_n: float | None = None
+
+    @property
+    def is_ball(self) -> bool:
+        """True for a ball guide (Hertz point contact, Eq. 3), False for rollers (Eq. 4)."""
+        return self.contact_type == "ball"
+
+    @property
+    def element_diameter_m(self) -> float | None:
+        """Diameter of the rolling element (m): the ball or the roller."""
+        return self.roller_diameter_m
 
     @property
     def h3_m(self) -> float:
@@ -151,6 +216,20 @@ class Guide:
         rows = [(k, v) for k, v in self.__dict__.items() if k != "measuring_points_m"]
         rows += [(f"point_{k}_m", v) for k, v in self.measuring_points_m.items()]
         return pd.DataFrame(rows, columns=["field", "value"])
+
+
+def guide_reference(guide: Guide) -> str:
+    """How a file names its guide: the catalogue name, or the absolute path of the user's guide TOML.
+
+    Recordings written by ``guidefit simulate --guide FILE.toml`` carry this, so that
+    ``identify`` and ``explain`` find the guide again without ``--guide``.
+
+    >>> guide_reference(load_guide("MRB35"))
+    'MRB35'
+    """
+    if guide.source == "builtin" or not Path(guide.source).is_file():
+        return guide.name
+    return str(Path(guide.source).resolve())
 
 
 def builtin_guides() -> list[str]:
@@ -223,16 +302,19 @@ def _parse(text: str, where: str, source: str) -> Guide:
             raise GuideError(f"{where}: section [{section}] missing")
         if not isinstance(content, dict):
             raise GuideError(f"{where}: [{section}] must be a table")
+        content = _unalias(content, section, where)
         for key in content:
             if key not in spec:
                 hint = _suggest(key, spec)
                 raise GuideError(f"{where}: unknown field '{section}.{key}'{hint}")
         for key, (unit, kind, required) in spec.items():
             if key not in content:
-                if required:
+                if required and not _optional_here(key, data):
                     raise GuideError(f"{where}: field '{section}.{key}' missing")
-                values[key] = _DEFAULTS[key]
+                values[key] = _DEFAULTS.get(key)
                 continue
+            if key == "h0_m" and _two_rows(data):
+                kind = "nonneg"
             values[key] = _convert(content[key], unit, kind, f"{where}: field '{section}.{key}'")
     points = data.get("points", {})
     if not isinstance(points, dict):
@@ -242,9 +324,132 @@ def _parse(text: str, where: str, source: str) -> Guide:
     values["measuring_points_m"] = {
         str(k): tuple(_convert(v, "m", "vec3", f"{where}: field 'points.{k}'")) for k, v in points.items()
     }
+    if values["h0_m"] is None:
+        values["h0_m"] = 0.0
+    _check_ball_fields(values, where)
+    ball_diameter = values.pop("ball_diameter_m")
+    if values["contact_type"] == "ball":
+        values["roller_diameter_m"] = ball_diameter
+        if values["roller_stiffness_n_per_m"] is None:
+            values["roller_stiffness_n_per_m"] = math.nan  # filled from Eq. (3) below
     guide = Guide(source=source, **values)
+    if guide.is_ball:
+        guide = _resolve_ball(guide, where)
     _check_physical(guide, where)
     return guide
+
+
+def _unalias(content: dict, section: str, where: str) -> dict:
+    aliases = _ALIASES.get(section, {})
+    out = dict(content)
+    for alias, key in aliases.items():
+        if alias in out:
+            if key in out:
+                raise GuideError(f"{where}: fields '{section}.{alias}' and '{section}.{key}' are the same; give one")
+            out[key] = out.pop(alias)
+    return out
+
+
+def _contact_type(data: dict) -> str:
+    contact = data.get("contact")
+    return contact.get("contact_type", "roller") if isinstance(contact, dict) else "roller"
+
+
+def _two_rows(data: dict) -> bool:
+    rows = data.get("rows")
+    return isinstance(rows, dict) and rows.get("row_count") == 2
+
+
+def _optional_here(key: str, data: dict) -> bool:
+    """Fields required of a roller guide that a ball guide (or a two-row guide) may leave out."""
+    if key == "roller_stiffness_n_per_m":
+        return _contact_type(data) == "ball"  # computed from Eq. (3) at the preload
+    if key == "h0_m":
+        return _two_rows(data)  # both contact lines of a ball row at one depth
+    return False
+
+
+_BALL_ONLY = ("ball_diameter_m", "conformity_rail", "conformity_carriage", "preload_n", "preload_class",
+              "dynamic_load_rating_n")
+
+
+def _check_ball_fields(values: dict, where: str) -> None:
+    """One-line errors for a ball or roller guide's contact fields that do not fit together."""
+    ball = values["contact_type"] == "ball"
+    rows = values["row_count"]
+    if rows not in (2, 4):
+        raise GuideError(f"{where}: field 'rows.row_count' must be 2 or 4, got {rows}")
+    if rows == 2 and not ball:
+        raise GuideError(f"{where}: field 'rows.row_count' = 2 needs contact.contact_type = \"ball\" "
+                         "(two gothic-arch ball rows); roller guides have four rows")
+    if rows == 2 and values["h0_m"] not in (None, 0.0):
+        raise GuideError(f"{where}: field 'rows.h0_m' must be 0 or absent for row_count = 2 "
+                         "(both contacts of a ball row sit at depth h1)")
+    groove = values["groove"] or ("gothic_arch" if rows == 2 else "circular_arc")
+    if (rows == 2) != (groove == "gothic_arch"):
+        raise GuideError(f"{where}: field 'rows.groove' = '{groove}' does not fit row_count = {rows} "
+                         "(two rows: gothic_arch, four contact points per ball; four rows: circular_arc)")
+    values["groove"] = groove if ball else values["groove"]
+    law = values["contact_law"] or ("hertz_point" if ball else "palmgren")
+    if law != ("hertz_point" if ball else "palmgren"):
+        raise GuideError(f"{where}: field 'contact.contact_law' = '{law}' does not fit contact_type = "
+                         f"'{values['contact_type']}' (ball: hertz_point, Eq. 3; roller: palmgren, Eq. 4)")
+    values["contact_law"] = law
+    if not ball:
+        given = [k for k in _BALL_ONLY if values.get(k) is not None]
+        if given:
+            raise GuideError(f"{where}: field 'contact.{given[0]}' is for ball guides; set "
+                             "contact.contact_type = \"ball\" or remove it")
+        return
+    for key in ("ball_diameter_m", "conformity_rail", "conformity_carriage"):
+        if values[key] is None:
+            raise GuideError(f"{where}: field 'contact.{key}' missing (needed by a ball guide)")
+    for key in ("conformity_rail", "conformity_carriage"):
+        if not 0.5 < values[key] < 1.0:
+            raise GuideError(f"{where}: field 'contact.{key}' must be in (0.5, 1) (groove radius / ball "
+                             f"diameter; typically 0.51-0.54), got {values[key]}")
+    if values["roller_length_m"] is not None:
+        raise GuideError(f"{where}: field 'contact.roller_length_m' is for roller guides; a ball has no length")
+    if values["roller_diameter_m"] is not None:
+        raise GuideError(f"{where}: field 'contact.roller_diameter_m' is for roller guides; "
+                         "give a ball guide's 'contact.ball_diameter_m'")
+    for key in ("element_poisson", "raceway_poisson"):
+        if not 0 < values[key] < 0.5:
+            raise GuideError(f"{where}: field 'contact.{key}' must be in (0, 0.5), got {values[key]}")
+    ways = [k for k in ("preload_m", "preload_n", "preload_class") if values[k] not in (None, 0.0)]
+    if len(ways) > 1:
+        raise GuideError(f"{where}: fields 'contact.{ways[0]}' and 'contact.{ways[1]}' both set the preload; give one")
+    if values["preload_class"] is not None and values["dynamic_load_rating_n"] is None:
+        raise GuideError(f"{where}: field 'contact.preload_class' needs 'contact.dynamic_load_rating_n' "
+                         "(the class is a fraction of the dynamic load rating C)")
+
+
+def _resolve_ball(guide: Guide, where: str) -> Guide:
+    """A ball guide's preload as an interference (m) and, unless given, K_n at it from Eq. (3)."""
+    from guidefit.errors import ModelError
+    from guidefit.model import contact
+
+    try:
+        k_h = contact.ball_law_constant(guide)
+    except ModelError as exc:
+        raise GuideError(f"{where}: {exc}") from None
+    sin_b = math.sin(guide.contact_angle_rad)
+    preload_m = guide.preload_m
+    force = guide.preload_n
+    if guide.preload_class is not None:
+        force = PRELOAD_CLASSES[guide.preload_class] * guide.dynamic_load_rating_n
+    if force is not None:
+        # F_pre = 2 Z Q0 sin b: the vertical force with which the upper rows press against the lower ones
+        q0 = force / (2.0 * guide.effective_rollers_per_row * sin_b)
+        preload_m = (q0 / k_h) ** (2.0 / 3.0)
+    if not preload_m > 0 and math.isnan(guide.roller_stiffness_n_per_m):
+        raise GuideError(f"{where}: a ball guide without preload has no stiffness at zero load; give "
+                         "'contact.preload_m', 'contact.preload_n' or 'contact.preload_class' "
+                         "(or 'contact.roller_stiffness_n_per_m')")
+    k_n = guide.roller_stiffness_n_per_m
+    if math.isnan(k_n):
+        k_n = contact.BALL_EXPONENT * k_h * preload_m ** (contact.BALL_EXPONENT - 1.0)
+    return replace(guide, preload_m=preload_m, roller_stiffness_n_per_m=k_n)
 
 
 def _suggest(key: str, spec: dict) -> str:

@@ -201,8 +201,24 @@ def _check_calibration(calibration: str) -> None:
         raise ModelError(f"calibration '{calibration}': allowed {', '.join(CALIBRATIONS)}")
 
 
+def exponent(guide) -> float:
+    """Exponent e of the guide's load-approach law Q = C delta^e: 10/9 for rollers (Eq. 4), 3/2 for balls (Eq. 3).
+
+    >>> from guidefit.model.guides import load_guide
+    >>> round(exponent(load_guide("MRB35")), 4)
+    1.1111
+    """
+    from guidefit.model.contact import BALL_EXPONENT
+
+    return BALL_EXPONENT if getattr(guide, "is_ball", False) else EXPONENT
+
+
 def law_constant(guide) -> float:
-    """Palmgren's roller constant C (N m^(-10/9)) with Q = C delta^(10/9), delta the roller approach.
+    """The contact law's own constant C of Q = C delta^e (N m^(-e)), delta the element's approach.
+
+    Balls: ``C = k_h`` of Eq. (3), Hertz point contact on the rail and carriage
+    grooves in series (:func:`guidefit.model.contact.ball_law_constant`).
+    Rollers: Palmgren's constant (N m^(-10/9)), as follows.
 
     Two contacts of length L in series: ``C = k_l L^(8/9) / 2^(10/9)``,
     ``k_l = (3.84e-5)^(-10/9)`` in N and mm (:data:`K_L_SI` in SI). Scaled by the
@@ -212,6 +228,10 @@ def law_constant(guide) -> float:
     >>> f"{law_constant(load_guide('MRB35')):.4e}"
     '3.4206e+08'
     """
+    if getattr(guide, "is_ball", False):
+        from guidefit.model.contact import ball_law_constant
+
+        return ball_law_constant(guide) * guide.effective_roller_fraction
     L = guide.roller_length_m
     if L is None:
         raise ModelError(f"guide '{guide.name}': calibration 'law' needs field 'contact.roller_length_m'")
@@ -241,11 +261,15 @@ def contact_constant(guide, calibration: str = "nominal") -> float:
             "(a contact without preload has no stiffness at zero load)"
         )
     k_n = guide.roller_stiffness_n_per_m * guide.effective_roller_fraction
-    return k_n / (EXPONENT * delta ** (EXPONENT - 1.0))
+    e = exponent(guide)
+    return k_n / (e * delta ** (e - 1.0))
 
 
 def roller_force(approach_m, guide, calibration: str = "nominal") -> np.ndarray:
-    """Roller load Q (N) at a roller approach delta (m): Q = C delta^(10/9), 0 when delta <= 0.
+    """Element load Q (N) at an approach delta (m): Q = C delta^e, 0 when delta <= 0 (lift-off).
+
+    Balls: e = 3/2, Eq. (3), ``Q = k_h alpha^(3/2)`` (:mod:`guidefit.model.contact`).
+    Rollers: e = 10/9, as follows.
 
     Palmgren's line-contact law, the roller form of the paper's Eq. (3)
     (which the paper writes for balls): per contact
@@ -275,11 +299,13 @@ def roller_force(approach_m, guide, calibration: str = "nominal") -> np.ndarray:
     """
     c = contact_constant(guide, calibration)
     a = np.maximum(np.asarray(approach_m, dtype=float), 0.0)
-    return c * a**EXPONENT
+    return c * a ** exponent(guide)
 
 
 def roller_stiffness(approach_m, guide, calibration: str = "nominal") -> np.ndarray:
-    """Roller normal stiffness K_n = dQ/d delta (N/m) at a roller approach delta (m), Eq. (4).
+    """Element normal stiffness K_n = dQ/d delta (N/m) at an approach delta (m), Eq. (4) or (3).
+
+    Balls: ``K_n = (3/2) k_h alpha^(1/2)``, Eq. (3). Rollers as follows.
 
     ``K_n = (10/9) C delta^(1/9)`` (0 when delta <= 0): the paper's first form
     of Eq. (4), ``K_n = (10/9) k_l L^(8/9) delta^(1/9)``, for the two contacts of a
@@ -298,7 +324,8 @@ def roller_stiffness(approach_m, guide, calibration: str = "nominal") -> np.ndar
     """
     c = contact_constant(guide, calibration)
     a = np.maximum(np.asarray(approach_m, dtype=float), 0.0)
-    return EXPONENT * c * a ** (EXPONENT - 1.0)
+    e = exponent(guide)
+    return e * c * a ** (e - 1.0)
 
 
 def roller_capacity_n(guide) -> float | None:
@@ -314,7 +341,14 @@ def roller_capacity_n(guide) -> float | None:
     >>> from guidefit.model.guides import load_guide
     >>> round(roller_capacity_n(load_guide("MRB35")))
     4999
+
+    A ball: the load at 4200 MPa on its more stressed contact
+    (:func:`guidefit.model.contact.ball_capacity_n`).
     """
+    if getattr(guide, "is_ball", False):
+        from guidefit.model.contact import ball_capacity_n
+
+        return ball_capacity_n(guide)
     if guide.roller_diameter_m is None or guide.roller_length_m is None:
         return None
     e_star = STEEL_E_PA / (2.0 * (1.0 - STEEL_NU**2))
@@ -446,7 +480,7 @@ def solve_equilibrium(guide, load, calibration: str = "nominal") -> Equilibrium:
                 f"|{f[j]:.4g}| > {reach[j]:.4g} with every roller at {capacity:.4g} N)"
             )
 
-    e = EXPONENT
+    e = exponent(guide)
     w_coef = c / (e + 1.0)
 
     def potential(q):
@@ -454,7 +488,7 @@ def solve_equilibrium(guide, load, calibration: str = "nominal") -> Equilibrium:
         return float(np.sum(w_coef * a ** (e + 1.0)) - f @ q)
 
     # a full-contact reference tangent for regularising rows that have lifted off
-    k_ref = EXPONENT * c * max(delta0, 1e-6) ** (e - 1.0)
+    k_ref = e * c * max(delta0, 1e-6) ** (e - 1.0)
     h_ref = k_ref * (g.T @ g)
     q = np.zeros(5)
     residual_rel = math.inf
@@ -501,7 +535,7 @@ def solve_equilibrium(guide, load, calibration: str = "nominal") -> Equilibrium:
         i = int(np.argmax(load_i))
         raise ModelError(
             f"{what}: exceeds the static capacity of the contacts (roller load {load_i[i]:.4g} N in row "
-            f"{rows[i]} > {capacity:.4g} N at 4000 MPa contact stress)"
+            f"{rows[i]} > {capacity:.4g} N at {4200 if getattr(guide, 'is_ball', False) else 4000} MPa contact stress)"
         )
     lifted, partial = [], []
     for row in range(1, 5):

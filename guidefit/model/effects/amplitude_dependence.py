@@ -48,8 +48,10 @@ _DF_CACHE: dict = {}
 
 
 def apply(spec, guide, p):
-    """Small-amplitude (linearised) model: K_n ~ Delta^(1/9), Eq. (4)."""
-    return vib.scale_roller_stiffness(spec, p["preload_factor"] ** (1.0 / 9.0))
+    """Small-amplitude (linearised) model: K_n ~ Delta^(1/9), Eq. (4) (Delta^(1/2) for balls, Eq. 3)."""
+    from guidefit.model import static
+
+    return vib.scale_roller_stiffness(spec, p["preload_factor"] ** (static.exponent(guide) - 1.0))
 
 
 def effective_force(hit_forces_n) -> float:
