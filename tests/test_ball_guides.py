@@ -254,7 +254,9 @@ def test_simulate_identify_round_trip_on_a_ball_guide(tmp_path):
                                        "--record-length", "0.03", "--force", "40,100", "--seed", "3"])
     assert result.exit_code == 0, result.output
     truth = json.loads(out.with_suffix(".truth.json").read_text())["parameters"]
-    result = CliRunner().invoke(main, ["identify", str(out), "--json"])  # the file names the guide TOML
+    result = CliRunner().invoke(main, ["identify", str(out), "--json"])  # the file names the guide, not its TOML
+    assert result.exit_code == 2 and "--guide FILE.toml" in result.output.strip().splitlines()[-1], result.output
+    result = CliRunner().invoke(main, ["identify", str(out), "--json", "--guide", str(FOUR_ROW)])
     assert result.exit_code == 0, result.output
     found = json.loads(result.output.splitlines()[0])
     assert found["guide"] == "BALL4-25"

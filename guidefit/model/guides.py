@@ -219,17 +219,14 @@ class Guide:
 
 
 def guide_reference(guide: Guide) -> str:
-    """How a file names its guide: the catalogue name, or the absolute path of the user's guide TOML.
-
-    Recordings written by ``guidefit simulate --guide FILE.toml`` carry this, so that
-    ``identify`` and ``explain`` find the guide again without ``--guide``.
+    """How a file names its guide: its name (the recording contract's ``guide`` is a catalogue
+    name; a user's TOML is named by its ``name`` key, and ``--guide FILE.toml`` finds it again:
+    a path would not travel with the file, and other readers expect a name).
 
     >>> guide_reference(load_guide("MRB35"))
     'MRB35'
     """
-    if guide.source == "builtin" or not Path(guide.source).is_file():
-        return guide.name
-    return str(Path(guide.source).resolve())
+    return guide.name
 
 
 def builtin_guides() -> list[str]:
@@ -270,7 +267,8 @@ def load_guide(name_or_path: str | Path) -> Guide:
     path = Path(text_path)
     if not path.is_file():
         known = ", ".join(builtin_guides())
-        raise GuideError(f"guide '{text_path}': not a built-in guide ({known}) and no such file")
+        raise GuideError(f"guide '{text_path}': not a built-in guide ({known}) and no such file; "
+                         "give the guide's TOML file: --guide FILE.toml")
     try:
         with path.open("rb") as handle:
             raw = handle.read(MAX_GUIDE_FILE_BYTES + 1)
