@@ -635,6 +635,41 @@ def export_cmd(results, fmt, joint, explain_paths, guide_name, element, units, a
         click.echo(text, nl=False)
 
 
+@main.command(name="correlate")
+@click.argument("fe_path", metavar="FE", type=click.Path(dir_okay=False))
+@click.argument("test_path", metavar="TEST", type=click.Path(dir_okay=False))
+@click.option("--point-map", "point_map", type=click.Path(dir_okay=False),
+              help="Lines 'test_point = fe_point' where the two sides name points differently.")
+@click.option("--json", "as_json", is_flag=True, help="The table, MAC matrix and warnings as one JSON object.")
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False), help="The MAC matrix as .png, .pdf or .svg.")
+@click.option("--check", "checks", metavar="max_error_pct=N,min_mac=N",
+              help="Exit 1 when a pair's |Eq. 34 error| or MAC is out of tolerance.")
+def correlate_cmd(fe_path, test_path, point_map, as_json, plot_path, checks):
+    """FE against test natural frequencies (paper Table 3): Eq. 34 error and MAC per mode pair.
+
+    FE: CalculiX .dat, Nastran .f06/.op2, or CSV; TEST: UFF-55 (.uff/.unv), guidefit JSON, or CSV.
+    """
+    import json
+
+    from guidefit import correlate as corr
+
+    _plot_file(plot_path)
+    _refuse([plot_path], [fe_path, test_path, point_map])
+    tolerances = corr.parse_checks(checks)
+    result = corr.run(fe_path, test_path, point_map)
+    if plot_path:
+        with _written(plot_path) as tmp:
+            corr.plot_mac(result, tmp)
+    if as_json:
+        click.echo(json.dumps(result.to_dict(), indent=1, allow_nan=False))
+    else:
+        click.echo(corr.render_table(result), nl=False)
+    bad = corr.failed_checks(result, tolerances)
+    if bad:
+        click.echo(f"guidefit: check failed: {'; '.join(bad)}", err=True)
+        sys.exit(1)
+
+
 @main.command(name="report")
 @click.argument("recording", type=click.Path(dir_okay=False))
 @click.option("-o", "--out", "out_path", required=True, type=click.Path(dir_okay=False),

@@ -234,7 +234,9 @@ def reference_deck(joints: list[Joint], elements: list[Element], *, units: str, 
     n_pad = max(0, math.ceil((5 * n_modes + 6 - free_dofs) / 3))
     k_pad = (2 * math.pi * PAD_FACTOR * top) ** 2 * 1.0
     lines += _pad_cards(max(used) + 1, n_pad, 1.0, k_pad)
-    lines += ["*STEP", "*FREQUENCY,STORAGE=YES", str(n_modes), "*END STEP"]
+    shape_nodes = sorted(n for model in models for n, m, _ in model.mass_points if m > 0)
+    lines += ["*NSET,NSET=GFSHAPE", *[str(n) for n in shape_nodes]]
+    lines += ["*STEP", "*FREQUENCY,STORAGE=YES", str(n_modes), "*NODE PRINT,NSET=GFSHAPE", "U", "*END STEP"]
     f_hi = 2.0 * top
     lines += ["*STEP", "*STEADY STATE DYNAMICS", f"{_ccx(f_hi / 1000)},{_ccx(f_hi)},3,1.", "*CLOAD", *loads,
               "*NODE PRINT,NSET=GFLOADED", "U", "*END STEP"]

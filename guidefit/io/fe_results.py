@@ -119,3 +119,85 @@ def read_ccx_dat(path) -> FEModes:
         for node in nodes:
             shapes[str(node)] = np.vstack([b[node] for _, b in blocks[:freqs.size]])
     return FEModes(freqs, shapes, str(path))
+
+
+_F06 = "R E A L   E I G E N V A L U E S"
+
+
+def read_f06(path) -> FEModes:
+    """Nastran ``.f06``: the cycles column of each ``R E A L   E I G E N V A L U E S`` table (SOL 103)."""
+    text = _text(path)
+    freqs = []
+    row = re.compile(r"^\s*\d+\s+\d+\s+(" + _NUMBER + r")\s+(" + _NUMBER + r")\s+(" + _NUMBER + r")")
+    for m in re.finditer(re.escape(_F06), text):
+        started = False
+        for line in text[m.end():].splitlines()[1:]:
+            hit = row.match(line)
+            if hit:
+                freqs.append(float(hit.group(3).replace("D", "E").replace("d", "e")))
+                started = True
+            elif started:
+                break
+    if not freqs:
+        raise FEResultError(f"{path}: no '{_F06}' table (not a Nastran SOL 103 .f06)")
+    return FEModes(np.array(freqs), {}, str(path))
+
+
+def read_op2(path) -> FEModes:
+    """Nastran ``.op2`` through pyNastran (optional: it pins numpy < 2), frequencies and grid shapes."""
+    try:
+        from pyNastran.op2.op2 import read_op2 as _read
+    except Exception as exc:  # noqa: BLE001 - not installed, or an install that cannot import with this numpy
+        raise FEResultError(f"{path}: reading .op2 needs pyNastran ({type(exc).__name__}); write an .f06 "
+                            "(ECHO/PARAM,POST) or a CSV instead") from None
+    try:
+        op2 = _read(str(path), debug=None)
+    except Exception as exc:  # noqa: BLE001 - pyNastran raises many types for a bad file
+        raise FEResultError(f"{path}: pyNastran cannot read it: {str(exc).splitlines()[0] if str(exc) else exc}") \
+            from None
+    if not op2.eigenvectors:
+        raise FEResultError(f"{path}: no real eigenvectors (not a SOL 103 .op2)")
+    vec = next(iter(op2.eigenvectors.values()))
+    freqs = np.sqrt(np.abs(np.asarray(vec.eigns, float))) / (2 * np.pi)
+    shapes = {str(int(node)): np.asarray(vec.data[:, k, :3], float) for k, (node, _) in enumerate(vec.node_gridtype)}
+    return FEModes(freqs, shapes, str(path))
+
+
+def read_modes_csv(path, what: str = "FE") -> FEModes:
+    """``frequency_hz`` (required), optional ``mode``/``label``, shape columns ``<point>:<x|y|z>``."""
+    import pandas as pd
+
+    try:
+        frame = pd.read_csv(path, comment="#")
+    except (OSError, ValueError) as exc:
+        raise FEResultError(f"{path}: cannot read as CSV: {str(exc).splitlines()[0]}") from None
+    cols = {c.strip().lower(): c for c in frame.columns}
+    if "frequency_hz" not in cols:
+        raise FEResultError(f"{path}: no 'frequency_hz' column ({what} modes CSV: frequency_hz[,label][,P:x,...])")
+    try:
+        freqs = frame[cols["frequency_hz"]].to_numpy(float)
+    except (TypeError, ValueError):
+        raise FEResultError(f"{path}: 'frequency_hz' holds text that is not a number") from None
+    if freqs.size == 0 or not np.all(np.isfinite(freqs)) or np.any(freqs <= 0):
+        raise FEResultError(f"{path}: every frequency_hz must be a positive number (and there must be one)")
+    shapes: dict = {}
+    for c in frame.columns:
+        point, sep, axis = str(c).strip().rpartition(":")
+        if sep and axis.lower() in ("x", "y", "z") and point:
+            col = shapes.setdefault(point, np.zeros((freqs.size, 3)))
+            try:
+                col[:, "xyz".index(axis.lower())] = frame[c].to_numpy(float)
+            except (TypeError, ValueError):
+                raise FEResultError(f"{path}: shape column '{c}' holds text that is not a number") from None
+    labels = tuple(str(v) for v in frame[cols["label"]]) if "label" in cols else ()
+    return FEModes(freqs, shapes, str(path), labels)
+
+
+def read_fe(path) -> FEModes:
+    """The FE side of ``correlate``, by suffix: ``.dat`` (ccx), ``.f06``/``.op2`` (Nastran), ``.csv``."""
+    suffix = Path(path).suffix.lower()
+    readers = {".dat": read_ccx_dat, ".f06": read_f06, ".op2": read_op2, ".csv": read_modes_csv}
+    if suffix not in readers:
+        raise FEResultError(f"{path}: FE results are read from .dat (CalculiX), .f06 or .op2 (Nastran) or "
+                            f".csv; not '{suffix or 'no suffix'}'")
+    return readers[suffix](path)
