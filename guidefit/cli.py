@@ -608,8 +608,8 @@ def _id_list(text: str | None, option: str):
 
 @main.command(name="export")
 @click.argument("results", type=click.Path(dir_okay=False))
-@click.option("--format", "fmt", type=click.Choice(["nastran", "ansys", "abaqus", "json"]), default="json",
-              show_default=True)
+@click.option("--format", "fmt", type=click.Choice(["nastran", "ansys", "abaqus", "json", "calculix"]),
+              default="json", show_default=True)
 @click.option("--joint", type=click.Choice(["explained", "apparent"]), default="explained", show_default=True,
               help="explained: the joint of the explained model, rig effects (sensor mass, soft support) removed; "
                    "apparent: the raw Eq. 24-29 values of the test.")
@@ -631,9 +631,14 @@ def _id_list(text: str | None, option: str):
               help="springs: vertical elements per carriage.")
 @click.option("--horizontal", "n_horizontal", default=8, show_default=True, type=click.IntRange(1, 10_000),
               help="springs: horizontal elements per carriage.")
+@click.option("--assembly", type=click.Choice(["include", "reference"]), default="include", show_default=True,
+              help="calculix: a file to *INCLUDE, or one runnable deck (joint, carriage body, rail fixed, "
+                   "*FREQUENCY) that checks the joint with one ccx call.")
+@click.option("--rot-node-offset", "rot_offset", default=50, show_default=True, type=click.IntRange(1, None),
+              help="calculix: a node's rotations are the DOFs of node + this (its rigid body's ROT NODE).")
 @click.option("-o", "--out", "out_path", type=click.Path(dir_okay=False), help="Write here instead of stdout.")
 def export_cmd(results, fmt, joint, explain_paths, guide_name, element, units, axis_map, carriage_nodes,
-               rail_nodes, first_element, id_step, n_vertical, n_horizontal, out_path):
+               rail_nodes, first_element, id_step, n_vertical, n_horizontal, assembly, rot_offset, out_path):
     """Joints for a machine FEM model: 6x6 stiffness and damping per carriage (paper Fig. 10)."""
     from guidefit import report
     from guidefit.export import export
@@ -643,13 +648,49 @@ def export_cmd(results, fmt, joint, explain_paths, guide_name, element, units, a
         text = export(results, fmt, joint=joint, explanations=explain_paths, guide=guide_name, element=element,
                       units=units, axis_map=axis_map, carriage_nodes=_id_list(carriage_nodes, "--carriage-node"),
                       rail_nodes=_id_list(rail_nodes, "--rail-node"), first_element=first_element,
-                      id_step=id_step, n_vertical=n_vertical, n_horizontal=n_horizontal, progress=progress)
+                      id_step=id_step, n_vertical=n_vertical, n_horizontal=n_horizontal, progress=progress,
+                      assembly=assembly, rot_offset=rot_offset)
     if out_path:
         from guidefit.outputs import write_text
 
         write_text(out_path, text)
     else:
         click.echo(text, nl=False)
+
+
+@main.command(name="correlate")
+@click.argument("fe_path", metavar="FE", type=click.Path(dir_okay=False))
+@click.argument("test_path", metavar="TEST", type=click.Path(dir_okay=False))
+@click.option("--point-map", "point_map", type=click.Path(dir_okay=False),
+              help="Lines 'test_point = fe_point' where the two sides name points differently.")
+@click.option("--json", "as_json", is_flag=True, help="The table, MAC matrix and warnings as one JSON object.")
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False), help="The MAC matrix as .png, .pdf or .svg.")
+@click.option("--check", "checks", metavar="max_error_pct=N,min_mac=N",
+              help="Exit 1 when a pair's |Eq. 34 error| or MAC is out of tolerance.")
+def correlate_cmd(fe_path, test_path, point_map, as_json, plot_path, checks):
+    """FE against test natural frequencies (paper Table 3): Eq. 34 error and MAC per mode pair.
+
+    FE: CalculiX .dat, Nastran .f06/.op2, or CSV; TEST: UFF-55 (.uff/.unv), guidefit JSON, or CSV.
+    """
+    import json
+
+    from guidefit import correlate as corr
+
+    _plot_file(plot_path)
+    _refuse([plot_path], [fe_path, test_path, point_map])
+    tolerances = corr.parse_checks(checks)
+    result = corr.run(fe_path, test_path, point_map)
+    if plot_path:
+        with _written(plot_path) as tmp:
+            corr.plot_mac(result, tmp)
+    if as_json:
+        click.echo(json.dumps(result.to_dict(), indent=1, allow_nan=False))
+    else:
+        click.echo(corr.render_table(result), nl=False)
+    bad = corr.failed_checks(result, tolerances)
+    if bad:
+        click.echo(f"guidefit: check failed: {'; '.join(bad)}", err=True)
+        sys.exit(1)
 
 
 @main.command(name="report")

@@ -91,7 +91,7 @@ import numpy as np
 
 from guidefit.errors import GuidefitError, IdentificationError
 
-FORMATS = ("nastran", "ansys", "abaqus", "json")
+FORMATS = ("nastran", "ansys", "abaqus", "json", "calculix")
 ELEMENTS = ("matrix", "bush", "springs")
 JOINTS = ("explained", "apparent")
 #: length scale (model metres -> output unit) and the labels of each unit system
@@ -766,12 +766,14 @@ def to_json(joints: list[Joint], elements: list[Element], units: str = "si", axi
 
 def export(results_path, fmt: str, *, joint: str = "explained", explanations=(), guide=None,
            element: str = "matrix", units: str = "si", axis_map: str | None = None, progress=None,
-           **numbering) -> str:
+           assembly: str = "include", **numbering) -> str:
     """Read identify results (and optional explain results) and render them in ``fmt``.
 
     ``explanations`` are paths of ``explain --json`` output; ``numbering``:
     ``carriage_nodes``, ``rail_nodes``, ``first_element``, ``id_step``,
-    ``n_vertical``, ``n_horizontal`` of :func:`build_elements`.
+    ``n_vertical``, ``n_horizontal`` of :func:`build_elements` (calculix also
+    ``rot_offset``); ``assembly="reference"``: calculix's runnable reference deck
+    (:mod:`guidefit.export_calculix`).
     """
     from guidefit.jsonio import read_json_documents
 
@@ -781,10 +783,18 @@ def export(results_path, fmt: str, *, joint: str = "explained", explanations=(),
     for path in explanations:
         for d in read_json_documents(path):
             docs.extend(d if isinstance(d, list) else [d])
+    if assembly != "include" and fmt != "calculix":
+        raise ExportError(f"export: --assembly {_safe(assembly, 20)} is for --format calculix only")
     rot = parse_axis_map(axis_map)
     unit_transform(units)
     joints = joints_from_results(read_results(results_path), joint, docs, guide, where=_safe(str(results_path)),
                                  progress=progress)
+    if fmt == "calculix":
+        from guidefit.export_calculix import render
+
+        return render(joints, element=element, units=units, axis_map=rot, axis_map_text=axis_map,
+                      assembly=assembly, guide=guide, **numbering)
+    numbering.pop("rot_offset", None)
     max_id = NASTRAN_MAX_ID if fmt == "nastran" else OTHER_MAX_ID
     per = {("ansys", "matrix"): 2, ("ansys", "bush"): 6, ("abaqus", "springs"): 2}.get((fmt, element), 1)
     elements = build_elements(joints, element, units=units, axis_map=rot, max_id=max_id, ids_per_element=per,

@@ -1,0 +1,300 @@
+r"""Test-analysis correlation: the paper's Table 3 for any structure (``guidefit correlate FE TEST``).
+
+FE side: :func:`guidefit.io.fe_results.read_fe` (CalculiX ``.dat``, Nastran
+``.f06``/``.op2``, CSV). Test side: UFF-55 mode shapes (``.uff``/``.unv``),
+guidefit JSON results (``identify --json``: modes with ``frequency_hz`` and
+``shape``), or a CSV of measured frequencies (and shapes).
+
+Pairing: where both sides have shapes at common points (names equal, or
+mapped by a point-map file: lines ``test_point = fe_point``), each test mode
+is paired with the FE mode of largest MAC (one FE mode per test mode, the
+assignment of largest total MAC); else by order (lowest test mode with lowest
+FE mode), with a warning. The error is the paper's Eq. (34),
+e = (f_FE - f_test) / f_test x 100 %, signed (positive: the model is stiff);
+``--check max_error_pct`` bounds its magnitude.
+
+MAC(a, b) = |a^H b|^2 / ((a^H a)(b^H b)) over the common DOFs (Allemang).
+
+Examples
+--------
+>>> mac(np.array([1.0, 2.0]), np.array([2.0, 4.0]))
+1.0
+>>> round(eq34_error_pct(1014.0, 1000.0), 6)
+1.4
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from guidefit.errors import GuidefitError
+from guidefit.io.fe_results import FEModes, FEResultError, read_fe, read_modes_csv
+
+CHECKS = ("max_error_pct", "min_mac")
+
+
+class CorrelateError(GuidefitError, ValueError):
+    """Bad input to correlate (exit 2, one line)."""
+
+
+def mac(a: np.ndarray, b: np.ndarray) -> float:
+    """Modal assurance criterion of two shape vectors (complex allowed)."""
+    a, b = np.asarray(a).ravel(), np.asarray(b).ravel()
+    den = float(np.real(np.vdot(a, a)) * np.real(np.vdot(b, b)))
+    return float(abs(np.vdot(a, b)) ** 2 / den) if den > 0 else 0.0
+
+
+def eq34_error_pct(f_fe: float, f_test: float) -> float:
+    """The paper's Eq. (34): relative error of the FE frequency, % of the measured one."""
+    return (f_fe - f_test) / f_test * 100.0
+
+
+# --------------------------------------------------------------------------- test side
+
+
+def _split_channel(name: str) -> tuple[str, int] | None:
+    """``acc_A_x`` or ``A:x`` -> (``A``, 0); None when the name carries no direction."""
+    m = re.match(r"^(?:acc_)?(.+?)[_:]([xyzXYZ])$", name.strip())
+    return (m.group(1), "xyz".index(m.group(2).lower())) if m else None
+
+
+def read_test_json(path) -> FEModes:
+    """Modes of guidefit results (``identify --json``): frequencies and real shapes at the sensors."""
+    from guidefit.jsonio import read_json_documents
+
+    docs = []
+    for d in read_json_documents(path):
+        docs.extend(d if isinstance(d, list) else [d])
+    modes = [m for d in docs if isinstance(d, dict) for m in (d.get("modes") or [])
+             if isinstance(m, dict) and m.get("level") is None and m.get("frequency_hz") is not None]
+    if not modes:
+        raise CorrelateError(f"{path}: no modes with a frequency_hz (is it identify --json output?)")
+    freqs = np.array([float(m["frequency_hz"]) for m in modes])
+    if not np.all(np.isfinite(freqs)) or np.any(freqs <= 0):
+        raise CorrelateError(f"{path}: a mode's frequency_hz is not a positive number")
+    shapes: dict = {}
+    for k, m in enumerate(modes):
+        for channel, value in (m.get("shape") or {}).items():
+            split = _split_channel(str(channel))
+            if split is None or value is None:
+                continue
+            shapes.setdefault(split[0], np.full((len(modes), 3), np.nan))[k, split[1]] = float(value)
+    labels = tuple(str(m.get("label") or "") for m in modes)
+    return FEModes(freqs, shapes, str(path), labels)
+
+
+def read_test_uff(path) -> FEModes:
+    """UFF-55 normal-mode sets (pyuff): frequency and the three translations at each node."""
+    try:
+        import pyuff
+    except ImportError:  # pragma: no cover - pyuff is a dependency
+        raise CorrelateError(f"{path}: reading UFF needs pyuff") from None
+    try:
+        sets = [s for s in pyuff.UFF(str(path)).read_sets() if isinstance(s, dict)]
+    except Exception as exc:  # noqa: BLE001 - pyuff raises many types for a bad file
+        raise CorrelateError(f"{path}: not a readable UFF file ({type(exc).__name__})") from None
+    sets = [s for s in sets if s.get("type") == 55 and s.get("freq") is not None]
+    if not sets:
+        raise CorrelateError(f"{path}: no UFF-55 mode shapes with a frequency (normal modes, analysis type 2)")
+    freqs = np.array([float(s["freq"]) for s in sets])
+    shapes: dict = {}
+    for k, s in enumerate(sets):
+        for i, node in enumerate(np.asarray(s["node_nums"]).astype(int)):
+            row = shapes.setdefault(str(node), np.full((len(sets), 3), np.nan))
+            row[k] = [np.real(s[f"r{j}"][i]) for j in (1, 2, 3)]
+    return FEModes(freqs, shapes, str(path))
+
+
+def read_test(path) -> FEModes:
+    """The test side of ``correlate``, by suffix."""
+    suffix = Path(path).suffix.lower()
+    if suffix in (".json", ".jsonl"):
+        return read_test_json(path)
+    if suffix in (".uff", ".unv"):
+        return read_test_uff(path)
+    if suffix == ".csv":
+        return read_modes_csv(path, "test")
+    raise CorrelateError(f"{path}: test modes are read from .uff/.unv (UFF-55), .json/.jsonl (guidefit "
+                         f"results) or .csv; not '{suffix or 'no suffix'}'")
+
+
+def read_point_map(path) -> dict[str, str]:
+    """``test_point = fe_point`` (or ``test_point,fe_point``) per line; ``#`` comments."""
+    out = {}
+    try:
+        lines = Path(path).read_text(encoding="utf-8").splitlines()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise CorrelateError(f"{path}: cannot read the point map: {exc}") from None
+    for n, line in enumerate(lines, 1):
+        line = line.split("#", 1)[0].strip()
+        if not line:
+            continue
+        parts = [p.strip() for p in re.split(r"[=,]", line)]
+        if len(parts) != 2 or not all(parts):
+            raise CorrelateError(f"{path}:{n}: expected 'test_point = fe_point', got '{line[:40]}'")
+        out[parts[0]] = parts[1]
+    return out
+
+
+# --------------------------------------------------------------------------- pairing
+
+
+@dataclass
+class Correlation:
+    """The Table 3 rows (one per test mode) and the MAC matrix (FE x test), None without shapes."""
+
+    rows: list
+    mac: np.ndarray | None
+    points: tuple
+    paired_by: str  # "mac" or "order"
+    warnings: tuple = ()
+
+    def to_dict(self) -> dict:
+        return {"paired_by": self.paired_by, "common_points": list(self.points), "modes": self.rows,
+                "mac_matrix": None if self.mac is None else self.mac.tolist(), "warnings": list(self.warnings),
+                "max_abs_error_pct": max(abs(r["error_pct"]) for r in self.rows),
+                "min_mac": None if self.mac is None else min(r["mac"] for r in self.rows)}
+
+
+def _stack(modes: FEModes, points) -> np.ndarray:
+    """(n_modes, 3 n_points) shapes at ``points``; NaN where a side has no value."""
+    return np.hstack([modes.shapes[p] for p in points])
+
+
+def mac_matrix(fe: FEModes, test: FEModes, point_map: dict | None = None) -> tuple[np.ndarray | None, tuple]:
+    """MAC of every FE mode with every test mode over the DOFs both have; (None, ()) without common points."""
+    point_map = point_map or {}
+    pairs = [(tp, point_map.get(tp, tp)) for tp in test.shapes if point_map.get(tp, tp) in fe.shapes]
+    if not pairs:
+        return None, ()
+    a = _stack(fe, [f for _, f in pairs])
+    b = _stack(test, [t for t, _ in pairs])
+    use = np.all(np.isfinite(a), axis=0) & np.all(np.isfinite(b), axis=0)
+    use &= np.any(b != 0, axis=0)  # a direction the test never measured is no common DOF
+    if use.sum() < 2:
+        return None, ()
+    out = np.array([[mac(a[i, use], b[j, use]) for j in range(len(test))] for i in range(len(fe))])
+    return out, tuple(t for t, _ in pairs)
+
+
+def correlate(fe: FEModes, test: FEModes, point_map: dict | None = None) -> Correlation:
+    """Pair the modes (MAC where shapes allow, else order) and give Eq. (34) and MAC per pair."""
+    notes = []
+    matrix, points = mac_matrix(fe, test, point_map)
+    if matrix is not None:
+        from scipy.optimize import linear_sum_assignment
+
+        if len(fe) < len(test):
+            raise CorrelateError(f"{len(test)} test modes but only {len(fe)} FE modes: compute more FE modes")
+        rows_i, cols_j = linear_sum_assignment(-matrix)
+        pairing = dict(zip(cols_j, rows_i))
+        paired_by = "mac"
+    else:
+        if fe.shapes and test.shapes:
+            notes.append("no common points with shapes on both sides (give --point-map): modes paired by order")
+        else:
+            notes.append("no shapes on " + ("either side" if not fe.shapes and not test.shapes
+                                            else "the FE side" if not fe.shapes else "the test side")
+                         + ": modes paired by order (lowest with lowest)")
+        if len(fe) < len(test):
+            raise CorrelateError(f"{len(test)} test modes but only {len(fe)} FE modes: compute more FE modes")
+        fe_order, test_order = np.argsort(fe.frequencies_hz), np.argsort(test.frequencies_hz)
+        pairing = dict(zip(test_order, fe_order))
+        paired_by = "order"
+    rows = []
+    for j in np.argsort(test.frequencies_hz):
+        i = int(pairing[j])
+        f_fe, f_test = float(fe.frequencies_hz[i]), float(test.frequencies_hz[j])
+        rows.append({"test_mode": int(j) + 1, "label": test.labels[j] if test.labels else "",
+                     "fe_mode": i + 1, "fe_hz": f_fe, "test_hz": f_test, "error_pct": eq34_error_pct(f_fe, f_test),
+                     "mac": None if matrix is None else float(matrix[i, j])})
+    return Correlation(rows, matrix, points, paired_by, tuple(notes))
+
+
+def parse_checks(text: str | None) -> dict:
+    """``max_error_pct=5,min_mac=0.8`` -> dict; bad text is a CorrelateError."""
+    out = {}
+    for item in (text or "").split(","):
+        if not item.strip():
+            continue
+        key, eq, value = (s.strip() for s in item.partition("="))
+        try:
+            number = float(value)
+        except ValueError:
+            number = math.nan
+        if not eq or key not in CHECKS or not math.isfinite(number):
+            raise CorrelateError(f"--check '{item.strip()[:40]}': use {'=N, '.join(CHECKS)}=N "
+                                 "(e.g. max_error_pct=5,min_mac=0.8)")
+        out[key] = number
+    return out
+
+
+def failed_checks(result: Correlation, checks: dict) -> list[str]:
+    """One message per violated tolerance."""
+    bad = []
+    if "max_error_pct" in checks:
+        for r in result.rows:
+            if abs(r["error_pct"]) > checks["max_error_pct"]:
+                bad.append(f"test mode {r['test_mode']}: |error| {abs(r['error_pct']):.3g} % > "
+                           f"{checks['max_error_pct']:g} %")
+    if "min_mac" in checks:
+        if result.mac is None:
+            bad.append("min_mac: no shapes to compute a MAC from")
+        else:
+            for r in result.rows:
+                if r["mac"] < checks["min_mac"]:
+                    bad.append(f"test mode {r['test_mode']}: MAC {r['mac']:.3f} < {checks['min_mac']:g}")
+    return bad
+
+
+def render_table(result: Correlation) -> str:
+    """Table 3: test mode, FE mode, frequencies, Eq. (34) error, MAC."""
+    lines = [f"{'test':>4} {'label':<10} {'FE':>4} {'FE f (Hz)':>12} {'test f (Hz)':>12} {'error %':>9} {'MAC':>6}"]
+    for r in result.rows:
+        m = "" if r["mac"] is None else f"{r['mac']:.3f}"
+        lines.append(f"{r['test_mode']:>4} {r['label'][:10]:<10} {r['fe_mode']:>4} {r['fe_hz']:>12.6g} "
+                     f"{r['test_hz']:>12.6g} {r['error_pct']:>+9.2f} {m:>6}")
+    lines.append(f"paired by {result.paired_by}; error = (f_FE - f_test) / f_test x 100 % (Eq. 34)")
+    return "\n".join(lines) + "\n"
+
+
+def plot_mac(result: Correlation, path) -> None:
+    """The MAC matrix (FE modes down, test modes across) as an image; the pairs outlined."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    if result.mac is None:
+        raise CorrelateError("--plot: no shapes on both sides at common points, so no MAC matrix to plot")
+    fig, ax = plt.subplots(figsize=(1.5 + 0.5 * result.mac.shape[1], 1.5 + 0.4 * result.mac.shape[0]))
+    image = ax.imshow(result.mac, vmin=0, vmax=1, cmap="viridis", aspect="auto")
+    for r in result.rows:
+        ax.add_patch(plt.Rectangle((r["test_mode"] - 1.5, r["fe_mode"] - 1.5), 1, 1, fill=False, color="red"))
+    ax.set_xlabel("test mode")
+    ax.set_ylabel("FE mode")
+    ax.set_xticks(range(result.mac.shape[1]), [str(k + 1) for k in range(result.mac.shape[1])])
+    ax.set_yticks(range(result.mac.shape[0]), [str(k + 1) for k in range(result.mac.shape[0])])
+    fig.colorbar(image, ax=ax, label="MAC")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def run(fe_path, test_path, point_map_path=None) -> Correlation:
+    """Read both sides and correlate them; unreadable input is a one-line error (exit 2)."""
+    try:
+        fe = read_fe(fe_path)
+    except FEResultError as exc:
+        raise CorrelateError(str(exc)) from None
+    test = read_test(test_path)
+    result = correlate(fe, test, read_point_map(point_map_path) if point_map_path else None)
+    for note in result.warnings:
+        warnings.warn(note, stacklevel=2)
+    return result
