@@ -693,6 +693,76 @@ def correlate_cmd(fe_path, test_path, point_map, as_json, plot_path, checks):
         sys.exit(1)
 
 
+@main.command(name="update")
+@click.argument("deck", type=click.Path(dir_okay=False))
+@click.argument("measured", type=click.Path(dir_okay=False))
+@click.option("--param", "params", multiple=True, required=True, metavar="SEL:NAME[=LO..HI]",
+              help="A joint factor to fit (repeatable): SEL joint1 | joint1,joint2 (shared) | all (shared) | each; "
+                   "NAME K_V, K_H, K_pitch, K_yaw, K_roll or K; bounds as factors (default 0.1..10).")
+@click.option("--point-map", "point_map", type=click.Path(dir_okay=False),
+              help="Lines 'test_point = fe_point' where the two sides name points differently.")
+@click.option("--freq-std", "freq_std", type=float, metavar="PCT",
+              help="Measured frequencies' std, % (default: from the residual).")
+@click.option("--units", type=click.Choice(["si", "mm-N-s", "mm-t-s"]),
+              help="The deck's unit system; the guidefit joints must be in it.")
+@click.option("--jobs", default=1, show_default=True, type=click.IntRange(1, 64), help="ccx runs at a time.")
+@click.option("--ccx", "ccx", metavar="PATH", help="The CalculiX program [default: ccx on PATH].")
+@click.option("--max-iterations", default=20, show_default=True, type=click.IntRange(1, 1000),
+              help="Solver iterations (each one ccx run, plus one per parameter for the sensitivities).")
+@click.option("-o", "--out-dir", "out_dir", type=click.Path(file_okay=False),
+              help="Folder for the updated joint files NAME.updated.inp [default: beside the deck].")
+@click.option("--json", "as_json", is_flag=True, help="Parameters, Table 3 before and after, as one JSON object.")
+def update_cmd(deck, measured, params, point_map, freq_std, units, jobs, ccx, max_iterations, out_dir, as_json):
+    """Update the guidefit joints of a CalculiX machine deck so its modes match measured ones.
+
+    DECK: a ccx deck (*FREQUENCY step) that *INCLUDEs joints from guidefit export --format calculix;
+    MEASURED: modes as correlate reads them (guidefit JSON, UFF-55, CSV).
+    """
+    import json
+    from pathlib import Path
+
+    from guidefit import report
+    from guidefit import update as upd
+    from guidefit.ccx_deck import find_ccx, load_deck
+    from guidefit.outputs import write_text
+
+    loaded = load_deck(deck)
+    if units and units != loaded.units:
+        raise upd.UpdateError(f"{deck}: --units {units} but its guidefit joints are in {loaded.units}: units that "
+                              "disagree; export the joints with --units " + units)
+    upd.parse_params(params, len(loaded.joints))
+    folder = Path(out_dir) if out_dir else Path(deck).parent
+    if not folder.is_dir():
+        raise upd.UpdateError(f"{folder}: output folder does not exist")
+    outs = {jf.path: folder / f"{jf.path.stem}.updated.inp" for jf in loaded.joint_files}
+    _refuse(list(outs.values()), [deck, measured, point_map, *loaded.files])
+    find_ccx(ccx)
+    with report.spinner("ccx runs") as bar:
+        count = [0]
+
+        def advance():
+            count[0] += 1
+            if bar is not None:
+                bar(count[0], None)
+
+        result = upd.update(deck, measured, params, point_map_path=point_map, freq_std_pct=freq_std, jobs=jobs,
+                            ccx=ccx, progress=advance, max_iterations=max_iterations)
+    texts = upd.updated_texts(result, (Path(deck).name, Path(measured).name))
+    for path, text in texts.items():
+        write_text(outs[path], text)
+        result.written.append(outs[path])
+    for note in result.notes:
+        click.echo(f"guidefit: warning: {note}", err=True)
+    for group, reason in result.problems:
+        click.echo(f"guidefit: warning: not identifiable: {', '.join(group)}: {reason}", err=True)
+    if as_json:
+        click.echo(json.dumps(result.to_dict(), indent=1, allow_nan=False, default=str))
+    else:
+        click.echo(upd.render(result), nl=False)
+        for w in result.written:
+            click.echo(f"wrote {w}")
+
+
 @main.command(name="report")
 @click.argument("recording", type=click.Path(dir_okay=False))
 @click.option("-o", "--out", "out_path", required=True, type=click.Path(dir_okay=False),
