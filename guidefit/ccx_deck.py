@@ -130,8 +130,8 @@ def _machine_of_model(axis_map: str, where: str) -> np.ndarray:
 
 
 def is_joint_file(lines: list) -> bool:
-    """The first line is guidefit's joint-export header and the include's rotation-node note follows."""
-    return bool(lines) and bool(_HEADER.match(lines[0])) and bool(_ROT.search(_header_text(lines)))
+    """The first line is guidefit's joint-export header (:func:`parse_joint_file` checks the rest)."""
+    return bool(lines) and bool(_HEADER.match(lines[0]))
 
 
 def _cells(lines: list, start: int, count: int) -> tuple[list, int]:
@@ -212,7 +212,7 @@ def parse_joint_file(path: Path, lines: list) -> JointFile:
     if "guidefit reference assembly" in head:
         raise DeckError(f"{where}: a guidefit reference assembly (a complete deck), not a joint to *INCLUDE; "
                         "export the joint without --assembly reference")
-    if units_m is None or map_m is None:
+    if units_m is None or map_m is None or rot_m is None:
         raise DeckError(f"{where}: guidefit joint header without its units or axis map (edited?)")
     starts = [(i, int(m.group(1))) for i, line in enumerate(lines) if (m := _CARRIAGE.match(line))]
     if not starts:
