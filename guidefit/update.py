@@ -461,5 +461,6 @@ def render(result: UpdateResult) -> str:
     worst_a = max(abs(r["error_pct"]) for r in result.after.rows)
     lines.append(f"paired by {result.after.paired_by}; Eq. (34) error = (f_FE - f_test) / f_test x 100 %; "
                  f"largest |error| {worst_b:.3g} % before, {worst_a:.3g} % after")
-    lines.append(f"{result.runs} ccx runs, {result.ccx_seconds:.2f} s in ccx of {result.total_seconds:.2f} s")
+    lines.append(f"{result.runs} ccx runs: {result.ccx_seconds:.2f} s of solver time (summed over the parallel "
+                 f"runs), {result.total_seconds:.2f} s in all")
     return "\n".join(lines) + "\n"
