@@ -239,7 +239,7 @@ def parse_joint_file(path: Path, lines: list) -> JointFile:
 
 
 def _fmt(x: float) -> str:
-    from guidefit.export_calculix import _ccx
+    from guidefit.export.calculix import _ccx
 
     return _ccx(x)
 

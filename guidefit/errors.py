@@ -42,3 +42,14 @@ class IdentificationError(GuidefitError):
     """Valid input, but no result can be trusted (no mode found, all hits rejected)."""
 
     exit_code = 1
+
+
+def first_line(exc: BaseException) -> str:
+    """The first line of an exception's message (its class name when it has none): what a one-line
+    error quotes of a library's error.
+
+    >>> first_line(OSError("Unable to open\\ndetails"))
+    'Unable to open'
+    """
+    text = str(exc).strip().splitlines()
+    return text[0] if text else exc.__class__.__name__

@@ -418,7 +418,7 @@ def update(deck_path, measured_path, param_texts, *, point_map_path=None, freq_s
 def updated_texts(result: UpdateResult, sources: tuple = ()) -> dict:
     """{joint file path: updated text}, a comment block naming the update in each."""
     from guidefit import __version__
-    from guidefit.export import _comment_lines
+    from guidefit.export.core import _comment_lines
 
     factors = joint_factors(result.deck, result.params, result.factors)
     out = {}

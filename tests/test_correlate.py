@@ -195,7 +195,7 @@ def test_ccx_dat_against_the_model_it_came_from(tmp_path):
                                     "--assembly", "reference", "-o", str(tmp_path / "deck.inp")])
     assert out.exit_code == 0, out.output
     subprocess.run([shutil.which("ccx"), "-i", "deck"], cwd=tmp_path, capture_output=True, check=False, timeout=120)
-    from guidefit.export_reference import mass_points
+    from guidefit.export.reference import mass_points
 
     sol = vib.solve_modes(vib.model_from_guide(GUIDE))
     pts = {str(10051 + k): p for k, (_, p) in enumerate(mass_points(GUIDE), start=1)}

@@ -15,8 +15,6 @@ from click.testing import CliRunner
 
 from guidefit.cli import main
 from guidefit.export import (
-    _nastran_float,
-    _nastran_real,
     apparent_joint,
     build_elements,
     explained_joint,
@@ -24,6 +22,7 @@ from guidefit.export import (
     read_results,
     to_nastran,
 )
+from guidefit.export.core import _nastran_float, _nastran_real
 from guidefit.model import vibration as vib
 from guidefit.model.guides import load_guide
 

@@ -17,8 +17,8 @@ from click.testing import CliRunner
 
 from guidefit.cli import main
 from guidefit.export import build_elements, export, joints_from_results, parse_axis_map
-from guidefit.export_calculix import IDS_PER_ELEMENT, _ccx, _terms
-from guidefit.export_reference import mass_points, point_gradient, reference_models
+from guidefit.export.calculix import IDS_PER_ELEMENT, _ccx, _terms
+from guidefit.export.reference import mass_points, point_gradient, reference_models
 from guidefit.io.fe_results import ccx_eigen_table, ccx_steady_state
 from guidefit.model import vibration as vib
 from guidefit.model.guides import load_guide

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from guidefit.errors import RecordingError
+from guidefit.errors import RecordingError, first_line
 
 UNIT_VECTOR_TOLERANCE = 1e-3
 """Largest allowed | |d| - 1 | of a direction vector."""
@@ -207,9 +207,7 @@ def _fmt_vec(vec) -> str:
     return "(" + ", ".join(f"{float(v):.6g}" for v in np.asarray(vec).reshape(-1)) + ")"
 
 
-def _first_line(exc: BaseException) -> str:
-    text = str(exc).strip().splitlines()
-    return text[0] if text else exc.__class__.__name__
+_first_line = first_line  # the one helper, in guidefit.errors
 
 
 # ------------------------------------------------------------- default layout

@@ -106,7 +106,7 @@ from pathlib import Path
 
 import numpy as np
 
-from guidefit.errors import GuidefitError, RecordingError
+from guidefit.errors import GuidefitError, RecordingError, first_line
 from guidefit.io.geometry import default_points
 from guidefit.io.records import (
     ACCELERATION_UNITS,
@@ -118,6 +118,7 @@ from guidefit.io.records import (
     RunData,
 )
 from guidefit.io.registry import FileFormat
+from guidefit.io.uff_geometry import DIRECTION_TOLERANCE, _direction_label
 
 __all__ = [
     "DIRECTION_TOLERANCE",
@@ -164,11 +165,8 @@ OTHER_POINT_NODE_BASE = 10
 """Node of the k-th other point name (k = 1, 2, ...) is this + k."""
 REFERENCE_NODE_BASE = 100
 """Reference (hammer) node of the i-th run (i = 1, 2, ...) is this + i."""
-DIRECTION_TOLERANCE = 1e-3
-"""A direction is along axis k when its k-component is within this of +-1."""
 
 _AXIS_CODES = {"x": 1, "y": 2, "z": 3}
-_DIRECTION_LABELS = {1: "X", 2: "Y", 3: "Z"}
 _FUNCTION_NAMES = {
     0: "general",
     1: "time response",
@@ -321,12 +319,6 @@ def direction_vector(code: int) -> np.ndarray:
     return vec
 
 
-def _direction_label(code: int) -> str:
-    if abs(code) in _DIRECTION_LABELS:
-        return ("+" if code > 0 else "-") + _DIRECTION_LABELS[abs(code)]
-    return str(code)
-
-
 # ------------------------------------------------------------------- writing
 
 
@@ -338,9 +330,7 @@ def _pyuff(display: str):
     return pyuff
 
 
-def _first_line(exc: BaseException) -> str:
-    text = str(exc).strip().splitlines()
-    return text[0] if text else exc.__class__.__name__
+_first_line = first_line  # the one helper, in guidefit.errors
 
 
 def _id_line(text: str) -> str:

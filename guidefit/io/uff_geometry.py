@@ -32,7 +32,7 @@ a node uses, a 2420 matrix whose axes are not orthonormal (within
 :data:`ORTHONORMAL_TOLERANCE`), a dataset 18 system whose points do not span
 a plane, a reference chain that loops, and a response or reference direction
 that, turned into the global frame, is not along X, Y or Z (within
-:data:`guidefit.io.uff.DIRECTION_TOLERANCE`): guidefit's sensors lie along the
+:data:`DIRECTION_TOLERANCE`): guidefit's sensors lie along the
 carriage axes.
 """
 
@@ -45,6 +45,18 @@ import numpy as np
 from guidefit.errors import RecordingError
 
 __all__ = ["ORTHONORMAL_TOLERANCE", "UffGeometry", "read_geometry"]
+
+DIRECTION_TOLERANCE = 1e-3
+"""A direction is along axis k when its k-component is within this of +-1."""
+
+_DIRECTION_LABELS = {1: "X", 2: "Y", 3: "Z"}
+
+
+def _direction_label(code: int) -> str:
+    if abs(code) in _DIRECTION_LABELS:
+        return ("+" if code > 0 else "-") + _DIRECTION_LABELS[abs(code)]
+    return str(code)
+
 
 ORTHONORMAL_TOLERANCE = 1e-4
 """Largest |R R^T - I| entry of a dataset 2420 rotation (its values have 16 digits)."""
@@ -90,7 +102,6 @@ class UffGeometry:
             The direction, turned into the global frame, is not along X, Y or Z.
         """
         from guidefit.io.axes import turn_code
-        from guidefit.io.uff import DIRECTION_TOLERANCE, _direction_label
 
         frame = self.frames.get(int(node))
         if frame is None or abs(int(code)) not in (1, 2, 3):

@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 
 from guidefit.errors import GuidefitError, RecordingError
-from guidefit.io._checks import _first_line
+from guidefit.errors import first_line as _first_line
 
 __all__ = ["HDF5_METADATA_TIMEOUT_S", "call_guarded", "in_child", "read_guarded", "timeout_s"]
 

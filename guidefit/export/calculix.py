@@ -32,7 +32,7 @@ How each element kind is written
 
 Auxiliary DOFs 2 and 3 and the ground node are held by ``*BOUNDARY`` in the
 include; they add no free DOF. Units and axes are those of
-:func:`guidefit.export.build_elements`.
+:func:`guidefit.export.core.build_elements`.
 
 Reference assembly (``assembly="reference"``)
 ---------------------------------------------
@@ -58,7 +58,7 @@ import math
 
 import numpy as np
 
-from guidefit.export import (
+from guidefit.export.core import (
     DOF_NAMES,
     UNIT_SYSTEMS,
     Element,
@@ -68,7 +68,6 @@ from guidefit.export import (
     _coupling_note,
     _fmt,
     _header,
-    build_elements,
 )
 
 #: ids per element of each kind: matrix and bush 6 K + 6 C terms and a ground node, springs spring + dashpot
@@ -248,24 +247,6 @@ def check_ids(elements: list[Element], element: str, id_step: int, rot_offset: i
         if element == "springs" and len(els) > rot_offset - 1:
             raise ExportError(f"export: {len(els)} springs per carriage reach the rotation nodes (node + "
                               f"{rot_offset}); raise --rot-node-offset")
-
-
-def render(joints: list[Joint], *, element: str = "matrix", units: str = "si", axis_map=None,
-           axis_map_text=None, assembly: str = "include", guide=None, **numbering) -> str:
-    """``export --format calculix``: the include file, or the reference assembly deck."""
-    rot_offset = int(numbering.pop("rot_offset", None) or DEFAULT_ROT_OFFSET)
-    elements = build_elements(joints, element, units=units, axis_map=axis_map,
-                              ids_per_element=IDS_PER_ELEMENT[element], **numbering)
-    check_ids(elements, element, numbering.get("id_step", 100), rot_offset)
-    if assembly == "include":
-        return to_calculix(joints, elements, units, axis_map_text, element, rot_offset)
-    if assembly != "reference":
-        raise ExportError(f"export: assembly '{assembly}' unknown; use include or reference")
-    from guidefit.export_reference import reference_deck
-
-    return reference_deck(joints, elements, units=units, axis_map=axis_map, axis_map_text=axis_map_text,
-                          element=element, rot_offset=rot_offset, guide=guide,
-                          n_vertical=numbering.get("n_vertical", 4))
 
 
 def length_and_mass_scale(units: str) -> tuple[float, float]:

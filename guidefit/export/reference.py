@@ -1,6 +1,6 @@
 """The CalculiX reference assembly: a joint, the guide's carriage as a rigid body, the rail fixed.
 
-See :mod:`guidefit.export_calculix` ("Reference assembly"). :func:`reference_models`
+See :mod:`guidefit.export.calculix` ("Reference assembly"). :func:`reference_models`
 gives, per carriage, what the deck contains as matrices (machine axes, output
 units): the joint's K and C at the carriage node, the carriage's mass matrix,
 the restrained DOFs; guidefit's own frequencies of that joint come from them
@@ -14,14 +14,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from guidefit.export import DOF_NAMES, Element, ExportError, Joint, _comment_lines, _header
-from guidefit.export_calculix import (
+from guidefit.export.calculix import (
     _N_MASS_NODES,
     PAD_FACTOR,
     _carriage_cards,
     _ccx,
     length_and_mass_scale,
 )
+from guidefit.export.core import DOF_NAMES, Element, ExportError, Joint, _comment_lines, _header
 
 
 @dataclass(frozen=True)
@@ -183,7 +183,7 @@ def _pad_cards(first: int, count: int, mass: float, k: float) -> list[str]:
 
 def reference_deck(joints: list[Joint], elements: list[Element], *, units: str, axis_map: np.ndarray,
                    axis_map_text, element: str, rot_offset: int, guide=None, n_vertical: int = 4) -> str:
-    """The complete runnable deck (see the module docstring of :mod:`guidefit.export_calculix`)."""
+    """The complete runnable deck (see the module docstring of :mod:`guidefit.export.calculix`)."""
     models = reference_models(joints, elements, units=units, axis_map=axis_map, element=element,
                               rot_offset=rot_offset, guide=guide, n_vertical=n_vertical)
     lines = _header(joints, "**", units, axis_map_text, element)
