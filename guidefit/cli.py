@@ -434,19 +434,21 @@ def _map_files(files, guide_name, settings, jobs, console):
 def _pool_map(files, guide_name, settings, jobs, progress):
     """``_identify_one`` over ``files`` in ``jobs`` worker processes, results in input order.
 
-    Ctrl-C is the parent's: workers ignore SIGINT (blocked while they are forked, ignored by
-    their initializer), and on an interrupt or an error the workers are killed, never waited
-    for (a worker in the middle of a file would hold the exit for its whole run).
+    Ctrl-C and SIGTERM are the parent's: workers ignore SIGINT (blocked while they are forked,
+    ignored by their initializer), and on an interrupt, a SIGTERM or an error the workers are
+    killed, never waited for (a worker in the middle of a file would hold the exit for its whole
+    run). A parent killed outright takes its workers with it (:func:`guidefit.workers.init_worker`).
     """
     import signal
     from concurrent.futures import ProcessPoolExecutor
 
-    from guidefit.outputs import quiet_worker, register_children
+    from guidefit.outputs import register_children
+    from guidefit.workers import init_worker
 
-    pool = ProcessPoolExecutor(max_workers=jobs, initializer=quiet_worker)
+    pool = ProcessPoolExecutor(max_workers=jobs, initializer=init_worker, initargs=(os.getpid(),))
     done = False
     try:
-        old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
         try:  # the workers are forked here (a SIGINT now waits for the unblock below)
             futures = [pool.submit(_identify_one, path, guide_name, settings) for path in files]
             register_children(getattr(pool, "_processes", None) or {})

@@ -79,6 +79,9 @@ def in_child(function, p: Path, display: str, timeout: float):
         status = 0
         try:
             os.close(read_end)
+            from guidefit.workers import parent_death_signal
+
+            parent_death_signal()  # a reader looping on a damaged file dies with its (waiting) parent
             try:
                 answer = ("value", function(p, display))
             except GuidefitError as exc:
