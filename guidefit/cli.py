@@ -253,24 +253,24 @@ def _named_guide_error(path, exc):
 
 
 def _identify_one(path, guide, settings):
-    """Worker for one file: (exit code, Identification or None, error text)."""
+    """Worker for one file: (exit code, Identification or None, error line, the error's details)."""
     from guidefit.errors import GuideError, GuidefitError
     from guidefit.identify import identify
 
     try:
-        return 0, identify(path, guide=guide, settings=settings), None
+        return 0, identify(path, guide=guide, settings=settings), None, ()
     except GuideError as exc:
         if guide is None:
             exc = _named_guide_error(path, exc)
-        return exc.exit_code, None, str(exc)
+        return exc.exit_code, None, str(exc), exc.details
     except GuidefitError as exc:
-        return exc.exit_code, None, str(exc)
+        return exc.exit_code, None, str(exc), exc.details
     except Exception as exc:  # noqa: BLE001 - a batch goes on; the file is reported
         from guidefit.outputs import interrupted
 
         if interrupted():  # Ctrl-C broke something (an import reports it as ImportError)
             raise KeyboardInterrupt from None
-        return 1, None, f"{path}: internal error: {type(exc).__name__}: {exc} (please report this file)"
+        return 1, None, f"{path}: internal error: {type(exc).__name__}: {exc} (please report this file)", ()
 
 
 #: ``--fft-precision`` of ``identify`` and ``frf`` (the choices of guidefit.frf.PRECISIONS).
@@ -321,9 +321,11 @@ def _candidate_names(candidates: str | None):
 @click.option("--jobs", default=1, show_default=True, type=click.IntRange(1, 64),
               help="Files processed in parallel.")
 @click.option("--no-jackknife", is_flag=True, help="Skip the hit-group jackknife (faster, fit std only).")
+@click.option("-v", "--verbose", is_flag=True,
+              help="After an error or a rejection, every warning behind it on stderr (--json has them always).")
 @_fft_precision_option
 def identify_cmd(files, guide_name, estimator, as_json, csv_path, summary_path, plot_path, check_path,
-                 junit_path, jobs, no_jackknife, fft_precision):
+                 junit_path, jobs, no_jackknife, verbose, fft_precision):
     """Identify K_V, K_H, c_V, c_H from hammer recordings (Eq. 24-29)."""
     import time
     from pathlib import Path
@@ -352,17 +354,19 @@ def identify_cmd(files, guide_name, estimator, as_json, csv_path, summary_path, 
     started = time.perf_counter()
     worst, rows, outcomes = 0, [], []
     console = report._console(stderr=as_json)
-    for path, (code, result, error) in _map_files(files, guide_name, settings, jobs, console):
+    for path, (code, result, error, details) in _map_files(files, guide_name, settings, jobs, console):
         violations = []
         if result is None:
             click.echo(f"guidefit: error: {error}", err=True)
-            data = _failed_json(path, guide_name, code, error)
+            _echo_details(details, verbose)
+            data = _failed_json(path, guide_name, code, error, details)
             rows.append({"file": str(path), "error": error})
         else:
             data = result.to_dict()
             rows.append(result.summary_row())
             if result.gate is not None:  # modes reported, joint parameters withheld: identification failed
                 click.echo(f"guidefit: identification rejected: {path}: {result.gate}", err=True)
+                _echo_details(result.warnings, verbose)
                 code = max(code, 1)
             if plot_path:
                 with _written(plot_targets[path]) as tmp:
@@ -396,8 +400,15 @@ def identify_cmd(files, guide_name, estimator, as_json, csv_path, summary_path, 
     sys.exit(worst)
 
 
-def _failed_json(path, guide_name, code, error) -> dict:
-    """The JSON object of a file without a result: the contract's fields, every value null."""
+def _echo_details(details, verbose: bool) -> None:
+    """With ``--verbose``: the warnings behind an error line, one per line on stderr."""
+    for line in details if verbose else ():
+        click.echo(f"guidefit:   {line}", err=True)
+
+
+def _failed_json(path, guide_name, code, error, details=()) -> dict:
+    """The JSON object of a file without a result: the contract's fields, every value null; its
+    ``warnings`` are the error's details (every warning behind it), else the error line."""
     from guidefit.identify import joint_parameters
 
     guide = guide_name
@@ -409,7 +420,8 @@ def _failed_json(path, guide_name, code, error) -> dict:
         except Exception:  # noqa: BLE001 - unreadable file: the guide is unknown
             guide = None
     return {"file": str(path), "guide": guide, "parameters": joint_parameters(1.0, {}), "modes": [],
-            "warnings": [error], "error": error, "exit_code": code, "gate": None, "sensor_faults": []}
+            "warnings": list(details) or [error], "error": error, "exit_code": code, "gate": None,
+            "sensor_faults": []}
 
 
 def _map_files(files, guide_name, settings, jobs, console):
@@ -470,10 +482,13 @@ def _pool_map(files, guide_name, settings, jobs, progress):
 
 
 def _parse_window(text: str | None):
-    """``auto`` | ``none`` | ``force=SECONDS,tau=SECONDS,end=FRACTION`` -> WindowSettings."""
+    """``auto`` | ``none`` | ``force=SECONDS,tau=SECONDS,end=FRACTION`` -> WindowSettings; None (not
+    given) -> None: the default windows, and no word about them for an input that holds FRFs."""
     from guidefit.frf import WindowSettings
 
-    if text is None or text == "auto":
+    if text is None:
+        return None
+    if text == "auto":
         return WindowSettings()
     if text == "none":
         return WindowSettings(none=True)
@@ -497,9 +512,9 @@ def _parse_window(text: str | None):
 @main.command(name="frf")
 @click.argument("recording", type=click.Path(dir_okay=False))
 @click.option("--estimator", type=click.Choice(["H1", "H2", "Hv"]), default="H1", show_default=True)
-@click.option("--window", "window_text", default="auto", show_default=True,
+@click.option("--window", "window_text", default=None,
               help="auto | none | force=S,taper=S,tau=S,end=FRACTION (force window, exponential tau or "
-                   "its end level).")
+                   "its end level).  [default: auto; an input of FRFs has its own windows]")
 @click.option("--out", "out_path", type=click.Path(dir_okay=False),
               help="frf.csv, frf.h5 or frf.uff (UFF-58, needs pyuff); default: a summary on the terminal.")
 @_fft_precision_option
@@ -550,19 +565,23 @@ def explain_cmd(recording, modes_path, guide_name, candidates, as_json, plot_pat
     source = modes_path or recording
     from guidefit.errors import GuideError
 
-    ident = None
+    ident = result = None
     with report.spinner("explaining", enabled=not as_json) as progress:
         try:
             if recording is not None:  # explain(recording) in two steps: the plot shows this identification
                 from guidefit.explain import identify_for_explain
 
                 ident = identify_for_explain(recording, guide=guide_name, settings=settings)
-            result = explain(source if ident is None else ident, guide=guide_name, candidates=names, progress=progress,
-                             settings=settings)
+            if ident is None or ident.gate is None:  # a rejected identification: nothing to explain
+                result = explain(source if ident is None else ident, guide=guide_name, candidates=names,
+                                 progress=progress, settings=settings)
         except GuideError as exc:
             if guide_name is not None:
                 raise
             raise _named_guide_error(source, exc) from None
+    if result is None:  # as identify says it, and exit 1 (the modes are not those of a carriage on the guide)
+        click.echo(f"guidefit: identification rejected: {recording}: {ident.gate}", err=True)
+        sys.exit(1)
     if plot_path:
         with _written(plot_path) as tmp:
             report.plot_explanation_with_frf(result, tmp, ident)

@@ -20,10 +20,13 @@ class GuidefitError(Exception):
 
     exit_code = 2
 
-    def __init__(self, *args):
+    def __init__(self, *args, details=()):
         if args and isinstance(args[0], str):
             args = (args[0].replace("\r", "\\r").replace("\n", "\\n"), *args[1:])
         super().__init__(*args)
+        #: What lies behind the one-line message (every warning of a failed identification, say):
+        #: shown by ``identify --verbose`` and in its JSON, never in the line itself.
+        self.details = tuple(str(d) for d in details)
 
 
 class GuideError(GuidefitError, ValueError):
