@@ -105,6 +105,8 @@ def main():
     \b
     guidefit predict --guide MRB35        analytic stiffness and natural frequencies
     guidefit identify recording.h5        K_V, K_H, c_V, c_H from a hammer test
+    guidefit identify setup.toml          the same from your own DAQ files (a test setup:
+                                          docs/recordings.md, "Your own DAQ files: quick start")
     guidefit explain recording.h5         trace model-measurement residuals to a physical effect
     """
     # The linear algebra here is many small matrices (modal fits); OpenBLAS's thread pool only
@@ -326,7 +328,12 @@ def _candidate_names(candidates: str | None):
 @_fft_precision_option
 def identify_cmd(files, guide_name, estimator, as_json, csv_path, summary_path, plot_path, check_path,
                  junit_path, jobs, no_jackknife, verbose, fft_precision):
-    """Identify K_V, K_H, c_V, c_H from hammer recordings (Eq. 24-29)."""
+    """Identify K_V, K_H, c_V, c_H from hammer recordings (Eq. 24-29).
+
+    FILES are recordings (.h5, .csv, UFF .uff/.unv, FRF files frf.h5) or test setups (.toml) that
+    point at your own DAQ files (TDMS, MDF, MAT, WAV, CSV exports; pip install -e '.[daq]'):
+    docs/recordings.md, "Your own DAQ files: quick start".
+    """
     import time
     from pathlib import Path
 
@@ -519,7 +526,11 @@ def _parse_window(text: str | None):
               help="frf.csv, frf.h5 or frf.uff (UFF-58, needs pyuff); default: a summary on the terminal.")
 @_fft_precision_option
 def frf_cmd(recording, estimator, window_text, out_path, fft_precision):
-    """FRFs (H1/H2/Hv) and coherence of every response channel of any recording."""
+    """FRFs (H1/H2/Hv) and coherence of every response channel of any recording.
+
+    RECORDING is a recording (.h5, .csv, .uff) or a test setup (.toml) of your own DAQ files
+    (docs/recordings.md, "Your own DAQ files: quick start").
+    """
     from guidefit import report
     from guidefit.identify import IdentifySettings, frf_of_recording
 
@@ -552,7 +563,11 @@ def frf_cmd(recording, estimator, window_text, out_path, fft_precision):
 @_identify_options
 def explain_cmd(recording, modes_path, guide_name, candidates, as_json, plot_path, estimator, no_jackknife,
                 fft_precision):
-    """Trace the model-measurement residual to a physical effect; error before and after."""
+    """Trace the model-measurement residual to a physical effect; error before and after.
+
+    RECORDING is a recording (.h5, .csv, .uff, frf.h5) or a test setup (.toml) of your own DAQ
+    files (docs/recordings.md, "Your own DAQ files: quick start").
+    """
     from guidefit import report
     from guidefit.explain import explain
 
@@ -658,7 +673,11 @@ def export_cmd(results, fmt, joint, explain_paths, guide_name, element, units, a
 @click.option("--candidates", help="explain: comma-separated effect names to try (default: the whole library).")
 @_identify_options
 def report_cmd(recording, out_path, guide_name, candidates, estimator, no_jackknife, fft_precision):
-    """One self-contained HTML report of the identify and explain results (the same calls, same settings)."""
+    """One self-contained HTML report of the identify and explain results (the same calls, same settings).
+
+    RECORDING is a recording (.h5, .csv, .uff, frf.h5) or a test setup (.toml) of your own DAQ
+    files (docs/recordings.md, "Your own DAQ files: quick start").
+    """
     from guidefit import report
     from guidefit.html_report import write_report
 
@@ -680,7 +699,12 @@ def report_cmd(recording, out_path, guide_name, candidates, estimator, no_jackkn
               help="Recording to write in the contract format: .h5 (any runs), .csv (one run) or .uff.")
 @click.option("--compression", type=click.Choice(["gzip", "lzf"]), help="HDF5 filter for the samples.")
 def convert_cmd(source, out_path, compression):
-    """Write a test setup (or any recording) to the recording contract; never onto an input."""
+    """Write a test setup (or any recording) to the recording contract; never onto an input.
+
+    SOURCE is a test setup (.toml) that points at your own DAQ files (TDMS, MDF, MAT, WAV, CSV
+    exports; pip install -e '.[daq]'), or any recording: docs/recordings.md, "Your own DAQ
+    files: quick start".
+    """
     from guidefit.io.setup import convert
 
     recording = convert(source, out_path, compression=compression)
