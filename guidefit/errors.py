@@ -45,3 +45,39 @@ class IdentificationError(GuidefitError):
     """Valid input, but no result can be trusted (no mode found, all hits rejected)."""
 
     exit_code = 1
+
+
+#: Characters of run-level warnings an identification error quotes; all of them are its ``details``.
+ERROR_REASON_CHARS = 160
+
+
+def identification_failure(text: str, warnings) -> IdentificationError:
+    """An :class:`IdentificationError` of one short line: ``text`` and the first run-level reason.
+
+    The per-hit warnings (each rejected hit) are left out of the line (the run's own
+    reason counts them), as are reasons past :data:`ERROR_REASON_CHARS` characters; every
+    warning stays in the error's ``details`` (``identify --verbose``, ``--json``).
+
+    >>> err = identification_failure("r.h5: no run gave an FRF", [
+    ...     "run 'v' hit 0: rejected: clipped: force (13 samples at 2047.94 N)",
+    ...     "run 'v': no accepted hit to average (1 rejected: clipped x1)"])
+    >>> print(err)
+    r.h5: no run gave an FRF (run 'v': no accepted hit to average (1 rejected: clipped x1); 1 more warning(s): --verbose)
+    >>> len(err.details)
+    2
+    """
+    import textwrap
+
+    why = [w for w in warnings if " hit " not in w.split(":", 1)[0]]  # run-level reasons, not each hit
+    shown: list[str] = []
+    for w in why:
+        if shown and sum(map(len, shown)) + len(w) > ERROR_REASON_CHARS:
+            break
+        shown.append(textwrap.shorten(w, ERROR_REASON_CHARS, placeholder=" ..."))
+    left = len(warnings) - len(shown)
+    more = f"; {left} more warning(s): --verbose" if shown and left else ""
+    if shown:
+        reason = f" ({'; '.join(shown)}{more})"
+    else:
+        reason = f" ({len(warnings)} warning(s): --verbose)" if warnings else " (no hits)"
+    return IdentificationError(text + reason, details=warnings)

@@ -41,7 +41,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from guidefit.errors import IdentificationError
+from guidefit.errors import IdentificationError, identification_failure
 from guidefit.modeshapes import (  # also re-exported: guidefit.identify.IdentifiedMode etc.
     UNNAMED_LABELS,
     IdentifiedMode,
@@ -597,40 +597,6 @@ def _significant(candidates: list[dict]) -> list[dict]:
     return keep
 
 
-#: Characters of run-level warnings an identification error quotes; all of them are its ``details``.
-ERROR_REASON_CHARS = 160
-
-
-def failure(text: str, warnings) -> IdentificationError:
-    """An :class:`IdentificationError` of one short line: ``text`` and the first run-level reason.
-
-    The per-hit warnings (each rejected hit) are left out of the line (the run's own
-    reason counts them), as are reasons past :data:`ERROR_REASON_CHARS` characters; every
-    warning stays in the error's ``details`` (``identify --verbose``, ``--json``).
-
-    >>> err = failure("r.h5: no run gave an FRF", ["run 'v' hit 0: rejected: clipped: force",
-    ...                                             "run 'v': no accepted hit to average (1 rejected: clipped x1)"])
-    >>> str(err), len(err.details)
-    ("r.h5: no run gave an FRF (run 'v': no accepted hit to average (1 rejected: clipped x1); 1 more warning(s): \
---verbose)", 2)
-    """
-    import textwrap
-
-    why = [w for w in warnings if " hit " not in w.split(":", 1)[0]]  # run-level reasons, not each hit
-    shown: list[str] = []
-    for w in why:
-        if shown and sum(map(len, shown)) + len(w) > ERROR_REASON_CHARS:
-            break
-        shown.append(textwrap.shorten(w, ERROR_REASON_CHARS, placeholder=" ..."))
-    left = len(warnings) - len(shown)
-    more = f"; {left} more warning(s): --verbose" if shown and left else ""
-    if shown:
-        reason = f" ({'; '.join(shown)}{more})"
-    else:
-        reason = f" ({len(warnings)} warning(s): --verbose)" if warnings else " (no hits)"
-    return IdentificationError(text + reason, details=warnings)
-
-
 def _combine(a: float | None, b: float | None) -> float | None:
     """Root-sum-square of two standard deviations, ignoring missing ones."""
     vals = [float(v) for v in (a, b) if v is not None and math.isfinite(v)]
@@ -833,7 +799,7 @@ def identify(path, guide=None, settings: IdentifySettings | None = None) -> Iden
         runs.append(RunResult(run.name, frf, rows, modes, tuple(run.excitation_direction),
                               frf_channels(run, frf), levels))
     if not runs:
-        raise failure(f"{path}: no run gave an FRF", warnings)
+        raise identification_failure(f"{path}: no run gave an FRF", warnings)
     axes = {r.name: int(np.argmax(np.abs(r.excitation_direction))) for r in runs}
     # sensor consistency and plausibility gate (guidefit.consistency): a channel that does not fit rigid
     # carriage motion is named and its runs fitted again with it corrected; the gate below withholds K and c
@@ -848,7 +814,7 @@ def identify(path, guide=None, settings: IdentifySettings | None = None) -> Iden
         modes = _with_jackknife(modes, {r.name: r.frf for r in runs})
     joint = {k: next((m for m in modes if m.label == lab), None) for k, lab in JOINT_LABELS.items()}
     if joint["V"] is None and joint["H"] is None:
-        raise failure(f"{path}: neither the vertical nor the horizontal joint mode was found", warnings)
+        raise identification_failure(f"{path}: neither the vertical nor the horizontal joint mode was found", warnings)
     _quality_warnings(modes, settings, warnings)
     _excitation_warnings(modes, {r.name: r.frf for r in runs}, warnings)
     params = joint_parameters(guide.mass_kg, joint)
@@ -883,7 +849,7 @@ def _identify_global(path, source, guide, model, settings) -> Identification:
     collected = list(file_frfs(source, settings, warnings) if from_frfs
                      else run_frfs(source, settings, warnings, failed_rows, frf_top_hz(model, settings)))
     if not collected:
-        raise failure(f"{path}: no run gave an FRF", warnings)
+        raise identification_failure(f"{path}: no run gave an FRF", warnings)
     order = {run.name: i for i, (run, _, _) in enumerate(collected)}
     run_of = {run.name: run for run, _, _ in collected}
     first = list(warnings)
@@ -918,7 +884,7 @@ def _identify_global(path, source, guide, model, settings) -> Identification:
     joint = {k: next((m for m in modes if m.label == lab), None) for k, lab in JOINT_LABELS.items()}
     neither = joint["V"] is None and joint["H"] is None
     if neither and (res is None or not (res.modes or res.extras)):
-        raise failure(f"{path}: neither the vertical nor the horizontal joint mode was found", warnings)
+        raise identification_failure(f"{path}: neither the vertical nor the horizontal joint mode was found", warnings)
     frf_by_run = {r.name: r.frf for r in runs}
     _quality_warnings(modes, settings, warnings)
     _excitation_warnings(modes, frf_by_run, warnings)
@@ -1038,7 +1004,7 @@ def frf_of_recording(path, settings: IdentifySettings | None = None):
                                                                                               warnings)
     frfsets = [frf for _run, frf, _rows in frfs]
     if not frfsets:
-        raise failure(f"{path}: no run gave an FRF", warnings)
+        raise identification_failure(f"{path}: no run gave an FRF", warnings)
     return frfsets, warnings
 
 
