@@ -52,10 +52,12 @@ ERROR_REASON_CHARS = 160
 
 
 def identification_failure(text: str, warnings) -> IdentificationError:
-    """An :class:`IdentificationError` of one short line: ``text`` and the first run-level reason.
+    """An :class:`IdentificationError` of one short line: ``text`` and the last run-level reasons.
 
-    The per-hit warnings (each rejected hit) are left out of the line (the run's own
-    reason counts them), as are reasons past :data:`ERROR_REASON_CHARS` characters; every
+    The latest warnings come first: they are of the stage that failed (the fit that found
+    no mode; each run's "no accepted hit"), the earlier ones of stages that went on. The
+    per-hit warnings (each rejected hit) are left out of the line (the run's own reason
+    counts them), as are reasons past :data:`ERROR_REASON_CHARS` characters; every
     warning stays in the error's ``details`` (``identify --verbose``, ``--json``).
 
     >>> err = identification_failure("r.h5: no run gave an FRF", [
@@ -68,7 +70,7 @@ def identification_failure(text: str, warnings) -> IdentificationError:
     """
     import textwrap
 
-    why = [w for w in warnings if " hit " not in w.split(":", 1)[0]]  # run-level reasons, not each hit
+    why = [w for w in reversed(warnings) if " hit " not in w.split(":", 1)[0]]  # run-level reasons, not each hit
     shown: list[str] = []
     for w in why:
         if shown and sum(map(len, shown)) + len(w) > ERROR_REASON_CHARS:
