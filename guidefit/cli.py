@@ -254,13 +254,22 @@ def _named_guide_error(path, exc):
     return GuideError(f"{path}: the guide the file names: {exc}; choose one with --guide NAME or a guide TOML")
 
 
-def _identify_one(path, guide, settings):
-    """Worker for one file: (exit code, Identification or None, error line, the error's details)."""
+def _identify_one(path, guide, settings, keep_frfs=True):
+    """Worker for one file: (exit code, Identification or None, error line, the error's details).
+
+    ``keep_frfs`` False: the runs' FRF arrays are dropped from the result (only ``--plot`` draws
+    them; a worker's result crosses a pipe, and large recordings give FRFs of 100 MB and more).
+    """
+    from dataclasses import replace
+
     from guidefit.errors import GuideError, GuidefitError
     from guidefit.identify import identify
 
     try:
-        return 0, identify(path, guide=guide, settings=settings), None, ()
+        result = identify(path, guide=guide, settings=settings)
+        if not keep_frfs:
+            result = replace(result, runs=tuple(replace(run, frf=None) for run in result.runs))
+        return 0, result, None, ()
     except GuideError as exc:
         if guide is None:
             exc = _named_guide_error(path, exc)
@@ -361,7 +370,8 @@ def identify_cmd(files, guide_name, estimator, as_json, csv_path, summary_path, 
     started = time.perf_counter()
     worst, rows, outcomes = 0, [], []
     console = report._console(stderr=as_json)
-    for path, (code, result, error, details) in _map_files(files, guide_name, settings, jobs, console):
+    for path, (code, result, error, details) in _map_files(files, guide_name, settings, jobs, console,
+                                                           keep_frfs=bool(plot_path)):
         violations = []
         if result is None:
             click.echo(f"guidefit: error: {error}", err=True)
@@ -431,8 +441,9 @@ def _failed_json(path, guide_name, code, error, details=()) -> dict:
             "sensor_faults": []}
 
 
-def _map_files(files, guide_name, settings, jobs, console):
-    """Yield (path, (code, result, error)) in input order, in parallel when jobs > 1, with a progress bar."""
+def _map_files(files, guide_name, settings, jobs, console, keep_frfs=True):
+    """Yield (path, (code, result, error, details)) in input order, in parallel when jobs > 1, with a
+    progress bar; without ``keep_frfs`` the workers send their results without the FRF arrays."""
     from guidefit import report
 
     progress = report.file_progress(len(files), console) if len(files) > 1 else None
@@ -444,13 +455,13 @@ def _map_files(files, guide_name, settings, jobs, console):
                     progress.advance()
                 yield path, outcome
             return
-        yield from _pool_map(files, guide_name, settings, jobs, progress)
+        yield from _pool_map(files, guide_name, settings, jobs, progress, keep_frfs)
     finally:
         if progress:
             progress.close()
 
 
-def _pool_map(files, guide_name, settings, jobs, progress):
+def _pool_map(files, guide_name, settings, jobs, progress, keep_frfs=True):
     """``_identify_one`` over ``files`` in ``jobs`` worker processes, results in input order.
 
     Ctrl-C and SIGTERM are the parent's: workers ignore SIGINT (blocked while they are forked,
@@ -469,7 +480,7 @@ def _pool_map(files, guide_name, settings, jobs, progress):
     try:
         old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
         try:  # the workers are forked here (a SIGINT now waits for the unblock below)
-            futures = [pool.submit(_identify_one, path, guide_name, settings) for path in files]
+            futures = [pool.submit(_identify_one, path, guide_name, settings, keep_frfs) for path in files]
             register_children(getattr(pool, "_processes", None) or {})
         finally:
             signal.pthread_sigmask(signal.SIG_SETMASK, old)

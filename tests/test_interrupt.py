@@ -189,3 +189,19 @@ def test_worker_without_the_kernel_watch_still_dies_with_its_parent(tmp_path):
         with contextlib.suppress(ProcessLookupError):
             os.killpg(proc.pid, signal.SIGKILL)
     assert left == [], left
+
+
+def test_workers_send_results_without_frfs_unless_plotted(recordings):
+    """Item 9: a worker's result crosses a pipe; without --plot it leaves the FRF arrays behind
+    (most of its bytes) and loses nothing that the tables, JSON or CSV show."""
+    import pickle
+
+    from guidefit.cli import _identify_one
+    from guidefit.identify import IdentifySettings
+
+    settings = IdentifySettings(jackknife=False)
+    full = _identify_one(recordings[0], None, settings)
+    slim = _identify_one(recordings[0], None, settings, keep_frfs=False)
+    assert all(run.frf is not None for run in full[1].runs) and all(run.frf is None for run in slim[1].runs)
+    assert len(pickle.dumps(slim)) < 0.1 * len(pickle.dumps(full))
+    assert slim[1].to_dict() == full[1].to_dict() and slim[1].summary_row() == full[1].summary_row()
