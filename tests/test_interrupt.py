@@ -205,3 +205,23 @@ def test_workers_send_results_without_frfs_unless_plotted(recordings):
     assert all(run.frf is not None for run in full[1].runs) and all(run.frf is None for run in slim[1].runs)
     assert len(pickle.dumps(slim)) < 0.1 * len(pickle.dumps(full))
     assert slim[1].to_dict() == full[1].to_dict() and slim[1].summary_row() == full[1].summary_row()
+
+
+def test_sigterm_ends_a_writer_at_once_without_its_temporary_file(tmp_path):
+    """SIGTERM (``timeout``, ``kill``) while an output is being written: exit 143, one line, and
+    the temporary file is removed (the default action left it behind)."""
+    import guidefit
+
+    here = str(Path(guidefit.__file__).parents[1])
+    proc = subprocess.Popen([sys.executable, "-m", "guidefit", "simulate", "--out", "sim.h5", "--hits", "60"],
+                            cwd=tmp_path, env={**os.environ, "PYTHONPATH": here}, start_new_session=True,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 30
+    while not list(tmp_path.iterdir()) and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.01)  # until the writer has opened its temporary file
+    if proc.poll() is not None:
+        pytest.skip("simulate finished before the signal")
+    os.kill(proc.pid, signal.SIGTERM)
+    _, err = proc.communicate(timeout=10)
+    assert proc.returncode == 143 and err.splitlines() == ["guidefit: terminated"], (proc.returncode, err)
+    assert list(tmp_path.iterdir()) == []
