@@ -105,6 +105,8 @@ def main():
     \b
     guidefit predict --guide MRB35        analytic stiffness and natural frequencies
     guidefit identify recording.h5        K_V, K_H, c_V, c_H from a hammer test
+    guidefit identify setup.toml          the same from your own DAQ files (a test setup:
+                                          docs/recordings.md, "Your own DAQ files: quick start")
     guidefit explain recording.h5         trace model-measurement residuals to a physical effect
     """
     # The linear algebra here is many small matrices (modal fits); OpenBLAS's thread pool only
@@ -272,25 +274,34 @@ def _named_guide_error(path, exc):
     return GuideError(f"{path}: the guide the file names: {exc}; choose one with --guide NAME or a guide TOML")
 
 
-def _identify_one(path, guide, settings):
-    """Worker for one file: (exit code, Identification or None, error text)."""
+def _identify_one(path, guide, settings, keep_frfs=True):
+    """Worker for one file: (exit code, Identification or None, error line, the error's details).
+
+    ``keep_frfs`` False: the runs' FRF arrays are dropped from the result (only ``--plot`` draws
+    them; a worker's result crosses a pipe, and large recordings give FRFs of 100 MB and more).
+    """
+    from dataclasses import replace
+
     from guidefit.errors import GuideError, GuidefitError
     from guidefit.identify import identify
 
     try:
-        return 0, identify(path, guide=guide, settings=settings), None
+        result = identify(path, guide=guide, settings=settings)
+        if not keep_frfs:
+            result = replace(result, runs=tuple(replace(run, frf=None) for run in result.runs))
+        return 0, result, None, ()
     except GuideError as exc:
         if guide is None:
             exc = _named_guide_error(path, exc)
-        return exc.exit_code, None, str(exc)
+        return exc.exit_code, None, str(exc), exc.details
     except GuidefitError as exc:
-        return exc.exit_code, None, str(exc)
+        return exc.exit_code, None, str(exc), exc.details
     except Exception as exc:  # noqa: BLE001 - a batch goes on; the file is reported
         from guidefit.outputs import interrupted
 
         if interrupted():  # Ctrl-C broke something (an import reports it as ImportError)
             raise KeyboardInterrupt from None
-        return 1, None, f"{path}: internal error: {type(exc).__name__}: {exc} (please report this file)"
+        return 1, None, f"{path}: internal error: {type(exc).__name__}: {exc} (please report this file)", ()
 
 
 #: ``--fft-precision`` of ``identify`` and ``frf`` (the choices of guidefit.frf.PRECISIONS).
@@ -341,11 +352,18 @@ def _candidate_names(candidates: str | None):
 @click.option("--jobs", default=1, show_default=True, type=click.IntRange(1, 64),
               help="Files processed in parallel.")
 @click.option("--no-jackknife", is_flag=True, help="Skip the hit-group jackknife (faster, fit std only).")
+@click.option("-v", "--verbose", is_flag=True,
+              help="After an error or a rejection, every warning behind it on stderr (--json has them always).")
 @_fft_precision_option
 @_input_axis_map
 def identify_cmd(files, guide_name, estimator, as_json, csv_path, summary_path, plot_path, check_path,
-                 junit_path, jobs, no_jackknife, fft_precision):
-    """Identify K_V, K_H, c_V, c_H from hammer recordings (Eq. 24-29)."""
+                 junit_path, jobs, no_jackknife, verbose, fft_precision):
+    """Identify K_V, K_H, c_V, c_H from hammer recordings (Eq. 24-29).
+
+    FILES are recordings (.h5, .csv, UFF .uff/.unv, FRF files frf.h5) or test setups (.toml) that
+    point at your own DAQ files (TDMS, MDF, MAT, WAV, CSV exports; pip install -e '.[daq]'):
+    docs/recordings.md, "Your own DAQ files: quick start".
+    """
     import time
     from pathlib import Path
 
@@ -373,17 +391,20 @@ def identify_cmd(files, guide_name, estimator, as_json, csv_path, summary_path, 
     started = time.perf_counter()
     worst, rows, outcomes = 0, [], []
     console = report._console(stderr=as_json)
-    for path, (code, result, error) in _map_files(files, guide_name, settings, jobs, console):
+    for path, (code, result, error, details) in _map_files(files, guide_name, settings, jobs, console,
+                                                           keep_frfs=bool(plot_path)):
         violations = []
         if result is None:
             click.echo(f"guidefit: error: {error}", err=True)
-            data = _failed_json(path, guide_name, code, error)
+            _echo_details(details, verbose)
+            data = _failed_json(path, guide_name, code, error, details)
             rows.append({"file": str(path), "error": error})
         else:
             data = result.to_dict()
             rows.append(result.summary_row())
             if result.gate is not None:  # modes reported, joint parameters withheld: identification failed
                 click.echo(f"guidefit: identification rejected: {path}: {result.gate}", err=True)
+                _echo_details(result.warnings, verbose)
                 code = max(code, 1)
             if plot_path:
                 with _written(plot_targets[path]) as tmp:
@@ -417,8 +438,15 @@ def identify_cmd(files, guide_name, estimator, as_json, csv_path, summary_path, 
     sys.exit(worst)
 
 
-def _failed_json(path, guide_name, code, error) -> dict:
-    """The JSON object of a file without a result: the contract's fields, every value null."""
+def _echo_details(details, verbose: bool) -> None:
+    """With ``--verbose``: the warnings behind an error line, one per line on stderr."""
+    for line in details if verbose else ():
+        click.echo(f"guidefit:   {line}", err=True)
+
+
+def _failed_json(path, guide_name, code, error, details=()) -> dict:
+    """The JSON object of a file without a result: the contract's fields, every value null; its
+    ``warnings`` are the error's details (every warning behind it), else the error line."""
     from guidefit.identify import joint_parameters
 
     guide = guide_name
@@ -430,11 +458,13 @@ def _failed_json(path, guide_name, code, error) -> dict:
         except Exception:  # noqa: BLE001 - unreadable file: the guide is unknown
             guide = None
     return {"file": str(path), "guide": guide, "parameters": joint_parameters(1.0, {}), "modes": [],
-            "warnings": [error], "error": error, "exit_code": code, "gate": None, "sensor_faults": []}
+            "warnings": list(details) or [error], "error": error, "exit_code": code, "gate": None,
+            "sensor_faults": []}
 
 
-def _map_files(files, guide_name, settings, jobs, console):
-    """Yield (path, (code, result, error)) in input order, in parallel when jobs > 1, with a progress bar."""
+def _map_files(files, guide_name, settings, jobs, console, keep_frfs=True):
+    """Yield (path, (code, result, error, details)) in input order, in parallel when jobs > 1, with a
+    progress bar; without ``keep_frfs`` the workers send their results without the FRF arrays."""
     from guidefit import report
 
     progress = report.file_progress(len(files), console) if len(files) > 1 else None
@@ -446,30 +476,32 @@ def _map_files(files, guide_name, settings, jobs, console):
                     progress.advance()
                 yield path, outcome
             return
-        yield from _pool_map(files, guide_name, settings, jobs, progress)
+        yield from _pool_map(files, guide_name, settings, jobs, progress, keep_frfs)
     finally:
         if progress:
             progress.close()
 
 
-def _pool_map(files, guide_name, settings, jobs, progress):
+def _pool_map(files, guide_name, settings, jobs, progress, keep_frfs=True):
     """``_identify_one`` over ``files`` in ``jobs`` worker processes, results in input order.
 
-    Ctrl-C is the parent's: workers ignore SIGINT (blocked while they are forked, ignored by
-    their initializer), and on an interrupt or an error the workers are killed, never waited
-    for (a worker in the middle of a file would hold the exit for its whole run).
+    Ctrl-C and SIGTERM are the parent's: workers ignore SIGINT (blocked while they are forked,
+    ignored by their initializer), and on an interrupt, a SIGTERM or an error the workers are
+    killed, never waited for (a worker in the middle of a file would hold the exit for its whole
+    run). A parent killed outright takes its workers with it (:func:`guidefit.workers.init_worker`).
     """
     import signal
     from concurrent.futures import ProcessPoolExecutor
 
-    from guidefit.outputs import quiet_worker, register_children
+    from guidefit.outputs import register_children
+    from guidefit.workers import init_worker
 
-    pool = ProcessPoolExecutor(max_workers=jobs, initializer=quiet_worker)
+    pool = ProcessPoolExecutor(max_workers=jobs, initializer=init_worker, initargs=(os.getpid(),))
     done = False
     try:
-        old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
         try:  # the workers are forked here (a SIGINT now waits for the unblock below)
-            futures = [pool.submit(_identify_one, path, guide_name, settings) for path in files]
+            futures = [pool.submit(_identify_one, path, guide_name, settings, keep_frfs) for path in files]
             register_children(getattr(pool, "_processes", None) or {})
         finally:
             signal.pthread_sigmask(signal.SIG_SETMASK, old)
@@ -489,10 +521,13 @@ def _pool_map(files, guide_name, settings, jobs, progress):
 
 
 def _parse_window(text: str | None):
-    """``auto`` | ``none`` | ``force=SECONDS,tau=SECONDS,end=FRACTION`` -> WindowSettings."""
+    """``auto`` | ``none`` | ``force=SECONDS,tau=SECONDS,end=FRACTION`` -> WindowSettings; None (not
+    given) -> None: the default windows, and no word about them for an input that holds FRFs."""
     from guidefit.frf import WindowSettings
 
-    if text is None or text == "auto":
+    if text is None:
+        return None
+    if text == "auto":
         return WindowSettings()
     if text == "none":
         return WindowSettings(none=True)
@@ -516,15 +551,19 @@ def _parse_window(text: str | None):
 @main.command(name="frf")
 @click.argument("recording", type=click.Path(dir_okay=False))
 @click.option("--estimator", type=click.Choice(["H1", "H2", "Hv"]), default="H1", show_default=True)
-@click.option("--window", "window_text", default="auto", show_default=True,
+@click.option("--window", "window_text", default=None,
               help="auto | none | force=S,taper=S,tau=S,end=FRACTION (force window, exponential tau or "
-                   "its end level).")
+                   "its end level).  [default: auto; an input of FRFs has its own windows]")
 @click.option("--out", "out_path", type=click.Path(dir_okay=False),
               help="frf.csv, frf.h5 or frf.uff (UFF-58, needs pyuff); default: a summary on the terminal.")
 @_fft_precision_option
 @_input_axis_map
 def frf_cmd(recording, estimator, window_text, out_path, fft_precision):
-    """FRFs (H1/H2/Hv) and coherence of every response channel of any recording."""
+    """FRFs (H1/H2/Hv) and coherence of every response channel of any recording.
+
+    RECORDING is a recording (.h5, .csv, .uff) or a test setup (.toml) of your own DAQ files
+    (docs/recordings.md, "Your own DAQ files: quick start").
+    """
     from guidefit import report
     from guidefit.identify import IdentifySettings, frf_of_recording
 
@@ -558,7 +597,11 @@ def frf_cmd(recording, estimator, window_text, out_path, fft_precision):
 @_input_axis_map
 def explain_cmd(recording, modes_path, guide_name, candidates, as_json, plot_path, estimator, no_jackknife,
                 fft_precision):
-    """Trace the model-measurement residual to a physical effect; error before and after."""
+    """Trace the model-measurement residual to a physical effect; error before and after.
+
+    RECORDING is a recording (.h5, .csv, .uff, frf.h5) or a test setup (.toml) of your own DAQ
+    files (docs/recordings.md, "Your own DAQ files: quick start").
+    """
     from guidefit import report
     from guidefit.explain import explain
 
@@ -571,19 +614,23 @@ def explain_cmd(recording, modes_path, guide_name, candidates, as_json, plot_pat
     source = modes_path or recording
     from guidefit.errors import GuideError
 
-    ident = None
+    ident = result = None
     with report.spinner("explaining", enabled=not as_json) as progress:
         try:
             if recording is not None:  # explain(recording) in two steps: the plot shows this identification
                 from guidefit.explain import identify_for_explain
 
                 ident = identify_for_explain(recording, guide=guide_name, settings=settings)
-            result = explain(source if ident is None else ident, guide=guide_name, candidates=names, progress=progress,
-                             settings=settings)
+            if ident is None or ident.gate is None:  # a rejected identification: nothing to explain
+                result = explain(source if ident is None else ident, guide=guide_name, candidates=names,
+                                 progress=progress, settings=settings)
         except GuideError as exc:
             if guide_name is not None:
                 raise
             raise _named_guide_error(source, exc) from None
+    if result is None:  # as identify says it, and exit 1 (the modes are not those of a carriage on the guide)
+        click.echo(f"guidefit: identification rejected: {recording}: {ident.gate}", err=True)
+        sys.exit(1)
     if plot_path:
         with _written(plot_path) as tmp:
             report.plot_explanation_with_frf(result, tmp, ident)
@@ -772,7 +819,11 @@ def update_cmd(deck, measured, params, point_map, freq_std, units, jobs, ccx, ma
 @_identify_options
 @_input_axis_map
 def report_cmd(recording, out_path, guide_name, candidates, estimator, no_jackknife, fft_precision):
-    """One self-contained HTML report of the identify and explain results (the same calls, same settings)."""
+    """One self-contained HTML report of the identify and explain results (the same calls, same settings).
+
+    RECORDING is a recording (.h5, .csv, .uff, frf.h5) or a test setup (.toml) of your own DAQ
+    files (docs/recordings.md, "Your own DAQ files: quick start").
+    """
     from guidefit import report
     from guidefit.html_report import write_report
 
@@ -794,7 +845,12 @@ def report_cmd(recording, out_path, guide_name, candidates, estimator, no_jackkn
               help="Recording to write in the contract format: .h5 (any runs), .csv (one run) or .uff.")
 @click.option("--compression", type=click.Choice(["gzip", "lzf"]), help="HDF5 filter for the samples.")
 def convert_cmd(source, out_path, compression):
-    """Write a test setup (or any recording) to the recording contract; never onto an input."""
+    """Write a test setup (or any recording) to the recording contract; never onto an input.
+
+    SOURCE is a test setup (.toml) that points at your own DAQ files (TDMS, MDF, MAT, WAV, CSV
+    exports; pip install -e '.[daq]'), or any recording: docs/recordings.md, "Your own DAQ
+    files: quick start".
+    """
     from guidefit.io.setup import convert
 
     recording = convert(source, out_path, compression=compression)

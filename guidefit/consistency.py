@@ -473,7 +473,8 @@ def scale_factor_hint(ratio: float) -> str:
     >>> scale_factor_hint(1003.0)
     'factor 1000: force reads 1000x high (sensitivity in mV/N entered as mV/kN?) or acceleration 1000x low'
     >>> scale_factor_hint(1 / 9.8)
-    'factor 9.81: accelerations read 9.81x high (data in m/s^2 declared as g?)'
+    'factor 9.81: accelerations read 9.81x high (data in m/s^2 declared as g, or a sensitivity in mV/(m/s^2) entered \
+with unit = "g"?)'
     """
     size = ratio if ratio >= 1 else 1 / ratio
     known = _known_factor(size)
@@ -482,8 +483,10 @@ def scale_factor_hint(ratio: float) -> str:
                 "structure, or force/acceleration calibration off")
     value = known[0]
     if value == 9.80665:
-        return ("factor 9.81: accelerations read 9.81x low (data in g declared as m/s^2?)" if ratio > 1
-                else "factor 9.81: accelerations read 9.81x high (data in m/s^2 declared as g?)")
+        return ('factor 9.81: accelerations read 9.81x low (data in g declared as m/s^2, or a sensitivity in mV/g '
+                'entered with unit = "m/s^2"?)' if ratio > 1 else
+                'factor 9.81: accelerations read 9.81x high (data in m/s^2 declared as g, or a sensitivity in '
+                'mV/(m/s^2) entered with unit = "g"?)')
     if value == 1000.0:
         return ("factor 1000: force reads 1000x high (sensitivity in mV/N entered as mV/kN?) or acceleration "
                 "1000x low" if ratio > 1 else

@@ -20,10 +20,13 @@ class GuidefitError(Exception):
 
     exit_code = 2
 
-    def __init__(self, *args):
+    def __init__(self, *args, details=()):
         if args and isinstance(args[0], str):
             args = (args[0].replace("\r", "\\r").replace("\n", "\\n"), *args[1:])
         super().__init__(*args)
+        #: What lies behind the one-line message (every warning of a failed identification, say):
+        #: shown by ``identify --verbose`` and in its JSON, never in the line itself.
+        self.details = tuple(str(d) for d in details)
 
 
 class GuideError(GuidefitError, ValueError):
@@ -53,3 +56,42 @@ def first_line(exc: BaseException) -> str:
     """
     text = str(exc).strip().splitlines()
     return text[0] if text else exc.__class__.__name__
+
+
+#: Characters of run-level warnings an identification error quotes; all of them are its ``details``.
+ERROR_REASON_CHARS = 160
+
+
+def identification_failure(text: str, warnings, hint: str = "") -> IdentificationError:
+    """An :class:`IdentificationError` of one short line: ``text``, the last run-level reasons and
+    ``hint`` (e.g. ``guidefit.io.axes.frame_hint``'s).
+
+    The latest warnings come first: they are of the stage that failed (the fit that found
+    no mode; each run's "no accepted hit"), the earlier ones of stages that went on. The
+    per-hit warnings (each rejected hit) are left out of the line (the run's own reason
+    counts them), as are reasons past :data:`ERROR_REASON_CHARS` characters; every
+    warning stays in the error's ``details`` (``identify --verbose``, ``--json``).
+
+    >>> err = identification_failure("r.h5: no run gave an FRF", [
+    ...     "run 'v' hit 0: rejected: clipped: force (13 samples at 2047.94 N)",
+    ...     "run 'v': no accepted hit to average (1 rejected: clipped x1)"])
+    >>> print(err)
+    r.h5: no run gave an FRF (run 'v': no accepted hit to average (1 rejected: clipped x1); 1 more warning(s): --verbose)
+    >>> len(err.details)
+    2
+    """
+    import textwrap
+
+    why = [w for w in reversed(warnings) if " hit " not in w.split(":", 1)[0]]  # run-level reasons, not each hit
+    shown: list[str] = []
+    for w in why:
+        if shown and sum(map(len, shown)) + len(w) > ERROR_REASON_CHARS:
+            break
+        shown.append(textwrap.shorten(w, ERROR_REASON_CHARS, placeholder=" ..."))
+    left = len(warnings) - len(shown)
+    more = f"; {left} more warning(s): --verbose" if shown and left else ""
+    if shown:
+        reason = f" ({'; '.join(shown)}{more})"
+    else:
+        reason = f" ({len(warnings)} warning(s): --verbose)" if warnings else " (no hits)"
+    return IdentificationError(text + reason + hint, details=warnings)

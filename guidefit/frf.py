@@ -586,7 +586,8 @@ def compute_frf(
             elif hit.accepted and hit.data is not None:
                 yield label, hit.data
             else:
-                rejected[getattr(hit, "reason", None) or "rejected"] += 1
+                # counted by kind ("clipped"), not by the whole reason (which names channels and samples)
+                rejected[(getattr(hit, "reason", None) or "rejected").split(":", 1)[0].strip()] += 1
 
     dtype = fft_dtype(precision, getattr(run, "sample_dtype", np.float64))
     # stored hits have the run's n_samples (a continuous run's records have another length)

@@ -97,10 +97,13 @@ def report_results(path, *, guide=None, settings=None, candidates=None, progress
     settings = settings or IdentifySettings()
     ident = identify_for_explain(path, guide=guide, settings=settings)
     explanation, error = None, None
-    try:
-        explanation = explain(ident, candidates=candidates, progress=progress)
-    except GuidefitError as exc:
-        error = str(exc)
+    if ident.gate is not None:  # as explain: the modes are not those of a carriage on the guide
+        error = f"identification rejected: {ident.gate}"
+    else:
+        try:
+            explanation = explain(ident, candidates=candidates, progress=progress)
+        except GuidefitError as exc:
+            error = str(exc)
     return ReportResults(str(path), ident, explanation, error, replace(settings, force_levels=True),
                          None if candidates is None else tuple(candidates), None if guide is None else str(guide))
 
@@ -212,7 +215,11 @@ def _header(res: ReportResults) -> list[str]:
             *_daq_rows(res.path),
             ["description", rec.description or "-"], ["guide", f"{ident.guide.name} (M = {ident.guide.mass_kg:g} kg)"],
             ["date", now], ["guidefit", __version__]]
-    parts = [f"<h1>guidefit report: {_e(res.path)}</h1>", "<h2>Provenance</h2>",
+    gate = getattr(ident, "gate", None)
+    banner = ([f"<p class='warn'><b>Identification rejected</b> (identify and explain exit 1): {_e(gate)}. "
+               "No joint parameters and no explanation are given; the modes found are listed below.</p>"]
+              if gate else [])
+    parts = [f"<h1>guidefit report: {_e(res.path)}</h1>", *banner, "<h2>Provenance</h2>",
              _table([], meta, table_cls="meta"),
              "<p>The same results as these commands (the report runs their calls with these settings):</p>",
              "<ul>" + "".join(f"<li><code>{_e(c)}</code></li>" for c in _command_lines(res)) + "</ul>",

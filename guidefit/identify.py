@@ -41,7 +41,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from guidefit.errors import IdentificationError
+from guidefit.errors import IdentificationError, identification_failure
 from guidefit.modeshapes import (  # also re-exported: guidefit.identify.IdentifiedMode etc.
     UNNAMED_LABELS,
     IdentifiedMode,
@@ -800,7 +800,7 @@ def identify(path, guide=None, settings: IdentifySettings | None = None) -> Iden
         runs.append(RunResult(run.name, frf, rows, modes, tuple(run.excitation_direction),
                               frf_channels(run, frf), levels))
     if not runs:
-        raise IdentificationError(f"{path}: no run gave an FRF ({'; '.join(warnings) or 'no hits'})")
+        raise identification_failure(f"{path}: no run gave an FRF", warnings)
     axes = {r.name: int(np.argmax(np.abs(r.excitation_direction))) for r in runs}
     # sensor consistency and plausibility gate (guidefit.consistency): a channel that does not fit rigid
     # carriage motion is named and its runs fitted again with it corrected; the gate below withholds K and c
@@ -815,9 +815,8 @@ def identify(path, guide=None, settings: IdentifySettings | None = None) -> Iden
         modes = _with_jackknife(modes, {r.name: r.frf for r in runs})
     joint = {k: next((m for m in modes if m.label == lab), None) for k, lab in JOINT_LABELS.items()}
     if joint["V"] is None and joint["H"] is None:
-        why = [w for w in warnings if " hit " not in w.split(":", 1)[0]]  # run-level reasons, not each hit
-        raise IdentificationError(f"{path}: neither the vertical nor the horizontal joint mode was found"
-                                  + (f" ({'; '.join(why)})" if why else "") + frame_hint(recording))
+        raise identification_failure(f"{path}: neither the vertical nor the horizontal joint mode was found", warnings,
+                                     hint=frame_hint(recording))
     _quality_warnings(modes, settings, warnings)
     _excitation_warnings(modes, {r.name: r.frf for r in runs}, warnings)
     params = joint_parameters(guide.mass_kg, joint)
@@ -855,7 +854,7 @@ def _identify_global(path, source, guide, model, settings) -> Identification:
     collected = list(file_frfs(source, settings, warnings) if from_frfs
                      else run_frfs(source, settings, warnings, failed_rows, frf_top_hz(model, settings)))
     if not collected:
-        raise IdentificationError(f"{path}: no run gave an FRF ({'; '.join(warnings) or 'no hits'})")
+        raise identification_failure(f"{path}: no run gave an FRF", warnings)
     order = {run.name: i for i, (run, _, _) in enumerate(collected)}
     run_of = {run.name: run for run, _, _ in collected}
     first = list(warnings)
@@ -890,9 +889,8 @@ def _identify_global(path, source, guide, model, settings) -> Identification:
     joint = {k: next((m for m in modes if m.label == lab), None) for k, lab in JOINT_LABELS.items()}
     neither = joint["V"] is None and joint["H"] is None
     if neither and (res is None or not (res.modes or res.extras)):
-        why = [w for w in warnings if " hit " not in w.split(":", 1)[0]]
-        raise IdentificationError(f"{path}: neither the vertical nor the horizontal joint mode was found"
-                                  + (f" ({'; '.join(why)})" if why else "") + frame_hint(recording))
+        raise identification_failure(f"{path}: neither the vertical nor the horizontal joint mode was found", warnings,
+                                     hint=frame_hint(recording))
     frf_by_run = {r.name: r.frf for r in runs}
     _quality_warnings(modes, settings, warnings)
     _excitation_warnings(modes, frf_by_run, warnings)
@@ -1014,7 +1012,7 @@ def frf_of_recording(path, settings: IdentifySettings | None = None):
                                                                                               warnings)
     frfsets = [frf for _run, frf, _rows in frfs]
     if not frfsets:
-        raise IdentificationError(f"{path}: no run gave an FRF ({'; '.join(warnings) or 'no hits'})")
+        raise identification_failure(f"{path}: no run gave an FRF", warnings)
     return frfsets, warnings
 
 

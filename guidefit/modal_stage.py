@@ -490,9 +490,12 @@ def _labelled(gf, candidates, per_run, frf_by_run, geometry, model, warnings, ba
     ev = lab_mod.evidence(measured, views, model, predicted)
     decided = lab_mod.label_modes(measured, views, model, predicted, ev)
     if ev.common_scale != 1.0:
+        from guidefit.consistency import scale_factor_hint
+
+        # constants s times the model's: the data of a body 1/s times the carriage's mass (1000: a prefix, 9.81: g)
         warnings.append(f"the modal constants are {abs(ev.common_scale):.3g} times those the model predicts for a "
-                        f"carriage of {mass_kg:.3g} kg at these sensors: a force or acceleration unit or "
-                        "sensitivity is off by about that factor (labels were made at the recording's own scale)")
+                        f"carriage of {mass_kg:.3g} kg at these sensors ({scale_factor_hint(1 / abs(ev.common_scale))}"
+                        "; labels were made at the recording's own scale)")
     visible = dict(zip(model.labels, lab_mod.visible_modes(predicted)))
     modes, extras = [], []
     for c, dec in zip(candidates, decided):

@@ -22,6 +22,9 @@ removed, exit 130 with one line); should the process still be alive a moment
 later (a C call that does not return, an exit handler waiting on a worker),
 a watchdog thread removes the pending temporary files, kills the registered
 worker processes, says ``guidefit: interrupted`` and ends the process.
+``SIGTERM`` (``kill``, ``timeout``) ends the program at once the same way:
+``guidefit: terminated``, exit 143 (workers die with their parent even when it
+is killed outright: :mod:`guidefit.workers`).
 """
 
 from __future__ import annotations
@@ -48,6 +51,7 @@ __all__ = [
     "refuse_inputs",
     "register_children",
     "replacing",
+    "terminated_exit",
     "write_bytes",
     "write_text",
 ]
@@ -428,11 +432,16 @@ def register_children(pids) -> None:
         _CHILDREN.update(int(p) for p in pids if p)
 
 
-def _cleanup_and_say() -> None:
+def _cleanup_and_say(message: bytes = b"guidefit: interrupted") -> None:
     import signal
 
-    with _LOCK:
+    # (a thread stopped inside a signal handler may hold the lock: go on without it after a while)
+    locked = _LOCK.acquire(timeout=0.2)
+    try:
         pending, children = list(_PENDING), list(_CHILDREN)
+    finally:
+        if locked:
+            _LOCK.release()
     for pid in children:
         with contextlib.suppress(OSError):
             os.kill(pid, signal.SIGKILL)
@@ -450,7 +459,7 @@ def _cleanup_and_say() -> None:
         with contextlib.suppress(OSError):
             # on a terminal a progress bar may have hidden the cursor and left a partial line
             prefix = b"\r\x1b[2K\x1b[?25h" if os.isatty(2) else b""
-            os.write(2, prefix + b"guidefit: interrupted\n")
+            os.write(2, prefix + message + b"\n")
 
 
 def interrupted_exit() -> None:
@@ -465,6 +474,16 @@ def interrupted_exit() -> None:
     os._exit(130)
 
 
+def terminated_exit() -> None:
+    """``SIGTERM``: say ``guidefit: terminated`` (once), kill registered workers, remove pending
+    temporary files and end with 143 (128 + SIGTERM) now, from any thread.
+
+    Standard output is not flushed: the main thread may be stopped holding its lock."""
+    _TERMINATING.set()
+    _cleanup_and_say(b"guidefit: terminated")
+    os._exit(143)
+
+
 def _watchdog(read_fd: int) -> None:
     import signal
     import time
@@ -477,6 +496,8 @@ def _watchdog(read_fd: int) -> None:
             return
         if not data:
             return
+        if signal.SIGTERM in data:  # no grace: whoever sent it wants the process gone
+            terminated_exit()
         if signal.SIGINT in data:
             _INTERRUPTED.set()
             time.sleep(INTERRUPT_GRACE_S)
@@ -497,8 +518,20 @@ def _raise_interrupt(signum, frame):
     raise KeyboardInterrupt
 
 
+_TERMINATING = threading.Event()  # SIGTERM received: the process is ending
+
+
+def _stop_main_thread(signum, frame):
+    """``SIGTERM``'s Python handler: stop the main thread here for good. The wake-up pipe has told
+    the watchdog thread, which ends the process; the main thread must not meanwhile report the
+    workers it kills as an error (a broken pool) or exit with another code. (The cleanup is not
+    done here: the main thread may hold a lock it needs.)"""
+    _TERMINATING.set()
+    threading.Event().wait()
+
+
 def install_interrupt_handler() -> None:
-    """The command line's Ctrl-C: see the module docstring. Main thread only.
+    """The command line's Ctrl-C and ``SIGTERM``: see the module docstring. Main thread only.
 
     A C-level wake-up pipe (:func:`signal.set_wakeup_fd`) tells the watchdog
     thread at once, even while the main thread is in a long C call.
@@ -516,6 +549,7 @@ def install_interrupt_handler() -> None:
         os.close(write_fd)
         return
     signal.signal(signal.SIGINT, _raise_interrupt)
+    signal.signal(signal.SIGTERM, _stop_main_thread)
     _INSTALLED.set()
     threading.Thread(target=_watchdog, args=(read_fd,), name="guidefit-interrupt", daemon=True).start()
 

@@ -8,6 +8,7 @@ finished is skipped (the machine may be fast), so every sample is a real interru
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import subprocess
@@ -116,3 +117,111 @@ def test_identify_jobs_2_ends_at_once_with_one_line(recordings, tmp_path):
 def test_any_command_ends_at_once_with_one_line(recordings, results, tmp_path, args):
     args = [str(a).format(*recordings, results=results) for a in args]
     _check([_interrupt(args, delay, tmp_path) for delay in (0.4, 1.0)], args)
+
+
+def _workers_started(pgid: int, timeout_s: float = 20.0) -> bool:
+    """True once the command's group holds a process besides the command itself (a pool worker)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if len(_group_alive(pgid)) > 1:
+            return True
+        time.sleep(0.02)
+    return False
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL], ids=["SIGTERM", "SIGKILL"])
+def test_identify_jobs_workers_die_with_the_parent(recordings, tmp_path, sig):
+    """Issue 21, item 9: after SIGTERM (``timeout``) or SIGKILL of the parent alone, no ``--jobs``
+    worker is left running (they were, for good, blocked on the pool's pipes)."""
+    import guidefit
+
+    err_path = tmp_path / "stderr.txt"
+    here = str(Path(guidefit.__file__).parents[1])  # the guidefit under test, whatever the folder
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [here, os.environ.get("PYTHONPATH")]))}
+    with err_path.open("w") as err:
+        proc = subprocess.Popen([sys.executable, "-m", "guidefit", "identify", *map(str, recordings), "--jobs", "2"],
+                                cwd=tmp_path, env=env, start_new_session=True, stdout=subprocess.DEVNULL,
+                                stderr=err)
+    try:
+        assert _workers_started(proc.pid), "no worker process appeared"
+        os.kill(proc.pid, sig)  # the parent only, not its group
+        proc.wait(timeout=10)
+        deadline = time.monotonic() + 5.0
+        while _group_alive(proc.pid) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        left = _group_alive(proc.pid)
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)  # whatever a failure left behind
+    assert left == [], f"left running after {sig.name} of the parent {proc.pid} ({proc.returncode}): {left}"
+    if sig == signal.SIGTERM:
+        assert proc.returncode == 143, (proc.returncode, err_path.read_text())
+        assert err_path.read_text().splitlines()[-1:] == ["guidefit: terminated"], err_path.read_text()
+
+
+def test_worker_without_the_kernel_watch_still_dies_with_its_parent(tmp_path):
+    """The portable fallback of item 9 (no ``prctl``): a thread polling the parent ends the worker."""
+    import guidefit
+
+    script = (
+        "import os, sys, time\n"
+        "from guidefit import workers\n"
+        "workers.parent_death_signal = lambda: False\n"  # as on a system without prctl
+        "parent = os.getpid()\n"
+        "if os.fork() == 0:\n"
+        "    workers.die_with_parent(parent)\n"
+        "    time.sleep(60)\n"
+        "    os._exit(0)\n"
+        "time.sleep(60)\n"
+    )
+    here = str(Path(guidefit.__file__).parents[1])
+    proc = subprocess.Popen([sys.executable, "-c", script], cwd=tmp_path, start_new_session=True,
+                            env={**os.environ, "PYTHONPATH": here})
+    try:
+        assert _workers_started(proc.pid), "the child did not start"
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=10)
+        deadline = time.monotonic() + 5.0
+        while _group_alive(proc.pid) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        left = _group_alive(proc.pid)
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert left == [], left
+
+
+def test_workers_send_results_without_frfs_unless_plotted(recordings):
+    """Item 9: a worker's result crosses a pipe; without --plot it leaves the FRF arrays behind
+    (most of its bytes) and loses nothing that the tables, JSON or CSV show."""
+    import pickle
+
+    from guidefit.cli import _identify_one
+    from guidefit.identify import IdentifySettings
+
+    settings = IdentifySettings(jackknife=False)
+    full = _identify_one(recordings[0], None, settings)
+    slim = _identify_one(recordings[0], None, settings, keep_frfs=False)
+    assert all(run.frf is not None for run in full[1].runs) and all(run.frf is None for run in slim[1].runs)
+    assert len(pickle.dumps(slim)) < 0.1 * len(pickle.dumps(full))
+    assert slim[1].to_dict() == full[1].to_dict() and slim[1].summary_row() == full[1].summary_row()
+
+
+def test_sigterm_ends_a_writer_at_once_without_its_temporary_file(tmp_path):
+    """SIGTERM (``timeout``, ``kill``) while an output is being written: exit 143, one line, and
+    the temporary file is removed (the default action left it behind)."""
+    import guidefit
+
+    here = str(Path(guidefit.__file__).parents[1])
+    proc = subprocess.Popen([sys.executable, "-m", "guidefit", "simulate", "--out", "sim.h5", "--hits", "60"],
+                            cwd=tmp_path, env={**os.environ, "PYTHONPATH": here}, start_new_session=True,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 30
+    while not list(tmp_path.iterdir()) and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.01)  # until the writer has opened its temporary file
+    if proc.poll() is not None:
+        pytest.skip("simulate finished before the signal")
+    os.kill(proc.pid, signal.SIGTERM)
+    _, err = proc.communicate(timeout=10)
+    assert proc.returncode == 143 and err.splitlines() == ["guidefit: terminated"], (proc.returncode, err)
+    assert list(tmp_path.iterdir()) == []

@@ -562,3 +562,76 @@ def test_docs_setup_examples_are_valid(tmp_path):
     setup = load_setup(tmp_path / "test.toml")
     assert list(setup.channels) == ["force", "acc_A_y", "acc_B_y"] and [r.name for r in setup.runs] == [
         "vertical", "lateral"]
+
+
+def _quick_start_setup() -> str:
+    """The TOML of docs/recordings.md's quick start (the block that starts with '# setup.toml')."""
+    from pathlib import Path
+
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "recordings.md").read_text()
+    return next(b for b in re.findall(r"```toml\n(.*?)```", doc, re.S) if b.startswith("# setup.toml"))
+
+
+@pytest.fixture(scope="module")
+def quick_start(tmp_path_factory):
+    """The quick start's DAQ files: a simulated paper's test (A-D, y in the vertical run, x in the
+    lateral one) in volts as two TDMS files with the DAQ names Hammer, Acc1-Acc4; the contract file."""
+    from dataclasses import replace
+
+    from nptdms import ChannelObject, TdmsWriter
+
+    from guidefit.io import write_recording
+    from guidefit.simulate import SimulationConfig, simulate
+
+    config = replace(SimulationConfig(), hits=3, record_s=0.03, layout="signals", gap_s=0.005,
+                     sensor_layout="default")
+    data, _ = simulate("MRB35", config=config, seed=7)
+    folder = tmp_path_factory.mktemp("quick_start")
+    write_recording(folder / "contract.h5", data)
+    for run in data.runs:
+        names = {"force": "Hammer", **{n: f"Acc{'ABCD'.index(n.split('_')[1]) + 1}" for n in run.channel_names[1:]}}
+        volts = {names[n]: np.asarray(run.data[:, k], float) * (2.25 if n == "force" else 10.2 / 9.80665) / 1000
+                 for k, n in enumerate(run.channel_names)}
+        with TdmsWriter(folder / f"{run.name}.tdms") as writer:
+            writer.write_segment([ChannelObject("Untitled", name, x, properties={
+                "wf_increment": 1 / run.sample_rate_hz, "unit_string": "V"}) for name, x in volts.items()])
+    (folder / "setup.toml").write_text(_quick_start_setup())
+    return folder
+
+
+def test_docs_quick_start_setup_identifies_the_paper_test(quick_start, monkeypatch):
+    """Issue 21, item 15: the quick start's setup, as printed, reads two DAQ files of the paper's test
+    (the same four sensors turned between runs) and gives the contract file's K and c."""
+    monkeypatch.chdir(quick_start)
+    setup = load_setup("setup.toml")
+    assert [r.name for r in setup.runs] == ["vertical", "lateral"]
+    rec = read_recording("setup.toml")
+    assert [[ch.name for ch in r.channels] for r in rec.runs] == [
+        ["force", "acc_A_y", "acc_B_y", "acc_C_y", "acc_D_y"], ["force", "acc_A_x", "acc_B_x", "acc_C_x", "acc_D_x"]]
+    runner = CliRunner()
+    a = runner.invoke(main, ["identify", "setup.toml", "--json", "--no-jackknife"])
+    b = runner.invoke(main, ["identify", "contract.h5", "--json", "--no-jackknife"])
+    assert a.exit_code == 0 and b.exit_code == 0, (a.output, b.output)
+    pa, pb = json.loads(a.stdout)["parameters"], json.loads(b.stdout)["parameters"]
+    for key in ("K_V", "K_H", "c_V", "c_H"):
+        assert abs(pa[key]["value"] - pb[key]["value"]) < 0.1 * pb[key]["std"], key
+
+
+def test_quick_start_sensitivity_per_m_s2_with_unit_g_is_named(quick_start, monkeypatch):
+    """Issue 21, item 13: 1.04 mV/(m/s^2) entered where unit = "g" wants mV/g: every acceleration
+    9.81x high; the warning says which factor and which key, K and c stay (they use f, zeta, M)."""
+    monkeypatch.chdir(quick_start)
+    (quick_start / "wrong.toml").write_text(_quick_start_setup().replace("sensitivity_mv = 10.2", "sensitivity_mv = 1.04"))
+    result = CliRunner().invoke(main, ["identify", "wrong.toml", "--json", "--no-jackknife"])
+    assert result.exit_code == 0, result.output
+    warnings = json.loads(result.stdout)["warnings"]
+    assert any('factor 9.81: accelerations read 9.81x high' in w and 'mV/(m/s^2) entered with unit = "g"' in w
+               for w in warnings), warnings
+
+
+@pytest.mark.parametrize("command", ["identify", "explain", "report", "frf", "convert"])
+def test_help_names_test_setups(command):
+    """Issue 21, item 15: a user with DAQ files learns from --help that a .toml test setup reads them."""
+    out = CliRunner().invoke(main, [command, "--help"]).output
+    assert "test setup (.toml)" in " ".join(out.split()) or "test setups (.toml)" in " ".join(out.split()), out
+    assert "quick start" in out

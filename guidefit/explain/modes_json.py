@@ -204,6 +204,9 @@ def read_modes_json(path):
     ------
     RecordingError
         One line naming the file and the entry at fault.
+    IdentificationError
+        The result is of an identification the plausibility gate rejected (its ``gate``
+        says why): its modes are not those of a carriage on the guide, nothing to explain.
 
     Examples
     --------
@@ -223,6 +226,11 @@ def read_modes_json(path):
     if len(docs) != 1:
         raise RecordingError(f"{p}: {len(docs)} JSON lines (one per recording); explain takes one")
     obj = docs[0]
+    gate = obj.get("gate") if isinstance(obj, dict) else None
+    if isinstance(gate, str) and gate:  # as identify said it (exit 1)
+        from guidefit.errors import IdentificationError
+
+        raise IdentificationError(f"identification rejected: {obj.get('file', p)}: {gate}")
     return modes_from_result(obj, str(p))
 
 

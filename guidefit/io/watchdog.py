@@ -15,6 +15,7 @@ and cannot kill a child that holds no Python lock any faster.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import time
 from pathlib import Path
@@ -79,6 +80,11 @@ def in_child(function, p: Path, display: str, timeout: float):
         status = 0
         try:
             os.close(read_end)
+            from guidefit.workers import parent_death_signal
+
+            parent_death_signal()  # a reader looping on a damaged file dies with its (waiting) parent
+            with contextlib.suppress(ValueError):  # SIGTERM ends the reader, not the command's handler
+                signal.signal(signal.SIGTERM, signal.SIG_DFL)
             try:
                 answer = ("value", function(p, display))
             except GuidefitError as exc:
