@@ -59,7 +59,7 @@ Examples
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -259,6 +259,7 @@ class Evidence:
     frequency: np.ndarray  # frequency cost
     visible: np.ndarray  # bool per model mode
     common_scale: float  # the recording's scale against the model's mass-normalised modes (1: as predicted)
+    run_factors: dict = field(default_factory=dict)  # run -> its scale against the others' (only runs off by > 3x)
 
     @property
     def combined(self) -> np.ndarray:
@@ -288,6 +289,10 @@ def evidence(measured: list[Measured], runs: dict, model, predicted: list[dict] 
     names = list(runs)
     n, n_model = len(measured), len(predicted)
     phi = np.asarray(model.shapes)[:5]
+    run_factors = _run_factors(measured, runs, phi)
+    if run_factors:  # each run at its own scale: one run's force or sensitivities off by a unit factor
+        measured = [Measured(x.frequency_hz, {r: np.asarray(c, float) / run_factors.get(r, 1.0)
+                                              for r, c in x.constants.items()}) for x in measured]
     stacked = [np.concatenate([np.asarray(x.constants.get(r, np.zeros(len(runs[r].channels))), float)
                                for r in names]) for x in measured]
     rho = np.ones((n, n_model))
@@ -325,7 +330,51 @@ def evidence(measured: list[Measured], runs: dict, model, predicted: list[dict] 
     f_meas = np.array([x.frequency_hz for x in measured], float).reshape(-1, 1)
     f_model = np.asarray(model.frequencies_hz, float).reshape(1, -1)
     freq_cost = np.log(f_meas / f_model) ** 2 / (2 * FREQUENCY_LOG_STD**2)
-    return Evidence(rho, raw / common, shape_cost, freq_cost, visible_modes(predicted), common)
+    return Evidence(rho, raw / common, shape_cost, freq_cost, visible_modes(predicted), common, run_factors)
+
+
+def _run_scale(constants: list, run, phi: np.ndarray) -> float | None:
+    """The median scale of a run's well-fitting modes (MAC >= :data:`SCALE_MAC` with a model mode through
+    the run's own sensors and hit) against the model's predicted constants; None when it has none."""
+    if run.drive is None:
+        return None
+    R = (phi.T @ run.sensors.T) * (run.drive @ phi)[:, None]  # (model modes, channels)
+    R[np.abs(R) <= 1e-9 * float(np.abs(R).max(initial=0.0))] = 0.0  # rounding, not a reading
+    rr = np.einsum("ij,ij->i", R, R)
+    seen = rr > 1e-6 * float(rr.max(initial=0.0))  # model modes this run's hit and sensors show at all
+    values = []
+    for m in constants:
+        mm = float(m @ m)
+        if mm <= 0 or not np.any(seen):
+            continue
+        mr = R @ m
+        mac = np.where(seen, mr**2 / (np.where(seen, rr, 1.0) * mm), 0.0)
+        i = int(np.argmax(mac))
+        if mac[i] >= SCALE_MAC:
+            values.append(mr[i] / rr[i])
+    return float(np.median(values)) if values else None
+
+
+def _run_factors(measured: list[Measured], runs: dict, phi: np.ndarray) -> dict:
+    """Runs whose modal constants are more than :data:`COMMON_SCALE_FACTOR` times the others' (a force or
+    sensitivity calibration of one run off by a unit factor: every mode of the run scaled alike), as
+    {run: factor against the run nearest the model's scale}; {} when the runs agree (or only one has a scale).
+
+    Each run's scale is the median over its well-fitting modes of the driving-point scale against the model
+    through its own sensors (:func:`_run_scale`); without this a run 1000 times the others would make the
+    modes it does not see look 1000 times too weak to be the carriage's.
+    """
+    scales = {}
+    for name, run in runs.items():
+        constants = [np.asarray(x.constants[name], float) for x in measured if name in x.constants]
+        scale = _run_scale(constants, run, phi)
+        if scale is not None and scale > 0:
+            scales[name] = scale
+    if len(scales) < 2 or max(scales.values()) <= COMMON_SCALE_FACTOR * min(scales.values()):
+        return {}
+    reference = min(scales.values(), key=lambda v: abs(math.log(v)))
+    return {name: v / reference for name, v in scales.items()
+            if abs(math.log(v / reference)) > math.log(COMMON_SCALE_FACTOR)}
 
 
 def extra_costs(ev: Evidence) -> np.ndarray:

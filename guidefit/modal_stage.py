@@ -496,6 +496,12 @@ def _labelled(gf, candidates, per_run, frf_by_run, geometry, model, warnings, ba
         warnings.append(f"the modal constants are {abs(ev.common_scale):.3g} times those the model predicts for a "
                         f"carriage of {mass_kg:.3g} kg at these sensors ({scale_factor_hint(1 / abs(ev.common_scale))}"
                         "; labels were made at the recording's own scale)")
+    for run, factor in ev.run_factors.items():
+        from guidefit.consistency import scale_factor_hint
+
+        warnings.append(f"run '{run}': its modal constants are {factor:.3g} times the other runs' (every mode "
+                        f"alike; {scale_factor_hint(1 / factor)}, in this run's force or accelerometer calibration); "
+                        "labels were made with each run at its own scale; K and c do not depend on it")
     visible = dict(zip(model.labels, lab_mod.visible_modes(predicted)))
     modes, extras = [], []
     for c, dec in zip(candidates, decided):

@@ -70,6 +70,28 @@ def test_faulty_accelerometer_is_named_and_corrected(one_axis, channel, factor, 
     assert result.gate is None
 
 
+@pytest.mark.parametrize("factor", [1000.0, 1 / 9.81])
+def test_one_run_off_by_a_unit_factor_keeps_its_labels_and_says_so(one_axis, factor):
+    """Every accelerometer of the lateral run off by a unit factor (mV/g entered for mV/(m/s^2), a kilo
+    prefix): the modes it does not see were called too weak to be the carriage's, K_V lost with exit 0.
+    Each run is now labelled at its own scale, and the run and its factor are named."""
+    data, _, clean, folder = one_axis
+    lateral = next(r for r in data.runs if "acc_A_x" in r.channel_names)
+    scaled = data
+    for name in lateral.channel_names:
+        if name != "force":
+            scaled = _scaled(scaled, name, factor)
+    path = folder / f"run_scale_{factor:g}.h5"
+    write_recording(path, scaled)
+    result = identify(path, settings=FAST)
+    assert {m.label for m in result.modes} == {m.label for m in clean.modes}
+    for key in ("K_V", "K_H", "c_V", "c_H"):  # amplitude-free: the clean file's numbers
+        assert result.parameters[key]["value"] == pytest.approx(clean.parameters[key]["value"], rel=1e-4), key
+    said = [w for w in result.warnings if w.startswith(f"run '{lateral.name}': its modal constants are")]
+    assert len(said) == 1 and f"{factor:.3g} times" in said[0], result.warnings
+    assert result.gate is None
+
+
 def test_force_levels_on_one_axis_are_explained_by_amplitude_dependence(tmp_path):
     from guidefit.explain import explain
     from guidefit.nonlinear import simulate_force_levels
