@@ -57,7 +57,18 @@ def _parent_alive(parent_pid: int, first_ppid: int) -> bool:
         return False
     except OSError:  # alive, owned by another user (cannot happen for our parent; be lenient)
         return True
-    return True
+    return not _zombie(parent_pid)
+
+
+def _zombie(pid: int) -> bool:
+    """True when ``pid`` has ended but is not reaped yet (Linux ``/proc``): a parent killed while this
+    worker started still answers ``kill(pid, 0)`` until its own parent waits for it."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as stat:
+            state = stat.read().rsplit(b")", 1)[-1].split()[0]
+    except (OSError, IndexError):  # no /proc (not Linux), or the process is gone between the calls
+        return False
+    return state in (b"Z", b"X")
 
 
 def _poll_parent(parent_pid: int, first_ppid: int) -> None:

@@ -110,7 +110,7 @@ def test_identify_jobs_2_ends_at_once_with_one_line(recordings, tmp_path):
     ["frf", "{0}", "--out", "frf.csv"],
     ["explain", "{0}", "--no-jackknife"],
     ["simulate", "--out", "sim.h5", "--hits", 60],
-    ["predict", "--sweep", "FV:0:900:61"],
+    ["predict", "--sweep", "FV:0:900:1000"],  # about 2 s: still running at the later interrupts
     ["report", "{0}", "-o", "report.html"],
     ["export", "{results}", "--format", "nastran", "-o", "joints.bdf"],
 ], ids=lambda a: a[0])
@@ -129,6 +129,22 @@ def _workers_started(pgid: int, timeout_s: float = 20.0) -> bool:
     return False
 
 
+def _kill_parent_and_collect(proc, sig, no_child: str) -> list:
+    """Wait for a child of ``proc``, send ``sig`` to ``proc`` alone (not its group), and return what of
+    its process group is still alive 5 s later; the group is killed afterwards either way."""
+    try:
+        assert _workers_started(proc.pid), no_child
+        os.kill(proc.pid, sig)
+        proc.wait(timeout=10)
+        deadline = time.monotonic() + 5.0
+        while _group_alive(proc.pid) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        return _group_alive(proc.pid)
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)  # whatever a failure left behind
+
+
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL], ids=["SIGTERM", "SIGKILL"])
 def test_identify_jobs_workers_die_with_the_parent(recordings, tmp_path, sig):
     """Issue 21, item 9: after SIGTERM (``timeout``) or SIGKILL of the parent alone, no ``--jobs``
@@ -142,17 +158,7 @@ def test_identify_jobs_workers_die_with_the_parent(recordings, tmp_path, sig):
         proc = subprocess.Popen([sys.executable, "-m", "guidefit", "identify", *map(str, recordings), "--jobs", "2"],
                                 cwd=tmp_path, env=env, start_new_session=True, stdout=subprocess.DEVNULL,
                                 stderr=err)
-    try:
-        assert _workers_started(proc.pid), "no worker process appeared"
-        os.kill(proc.pid, sig)  # the parent only, not its group
-        proc.wait(timeout=10)
-        deadline = time.monotonic() + 5.0
-        while _group_alive(proc.pid) and time.monotonic() < deadline:
-            time.sleep(0.05)
-        left = _group_alive(proc.pid)
-    finally:
-        with contextlib.suppress(ProcessLookupError):
-            os.killpg(proc.pid, signal.SIGKILL)  # whatever a failure left behind
+    left = _kill_parent_and_collect(proc, sig, "no worker process appeared")
     assert left == [], f"left running after {sig.name} of the parent {proc.pid} ({proc.returncode}): {left}"
     if sig == signal.SIGTERM:
         assert proc.returncode == 143, (proc.returncode, err_path.read_text())
@@ -177,17 +183,7 @@ def test_worker_without_the_kernel_watch_still_dies_with_its_parent(tmp_path):
     here = str(Path(guidefit.__file__).parents[1])
     proc = subprocess.Popen([sys.executable, "-c", script], cwd=tmp_path, start_new_session=True,
                             env={**os.environ, "PYTHONPATH": here})
-    try:
-        assert _workers_started(proc.pid), "the child did not start"
-        os.kill(proc.pid, signal.SIGKILL)
-        proc.wait(timeout=10)
-        deadline = time.monotonic() + 5.0
-        while _group_alive(proc.pid) and time.monotonic() < deadline:
-            time.sleep(0.05)
-        left = _group_alive(proc.pid)
-    finally:
-        with contextlib.suppress(ProcessLookupError):
-            os.killpg(proc.pid, signal.SIGKILL)
+    left = _kill_parent_and_collect(proc, signal.SIGKILL, "the child did not start")
     assert left == [], left
 
 

@@ -135,27 +135,21 @@ def _equation(aux: int, v: np.ndarray, cn: tuple[int, int], rn: tuple[int, int])
     return lines + [",".join(cells[i:i + 3]) for i in range(0, len(cells), 3)]  # ccx: lines of <= 132 characters
 
 
-def _damper_terms(base: int, ground: int, terms, cn, rn, comment: str) -> tuple[list[str], list[str]]:
-    """Auxiliary-node dashpots of the terms (lambda, v): (node lines, element and equation lines)."""
+def _term_lines(base: int, terms, cn, rn, comment: str, ground: int | None = None) -> tuple[list[str], list[str]]:
+    """Auxiliary-node elements of the terms (lambda, v) of a joint matrix: (node lines, element and
+    equation lines). ``ground`` None: springs (SPRING1 on the auxiliary node), else dashpots (DASHPOTA
+    from the auxiliary node to ``ground``); each auxiliary node's DOF 1 is tied to v . (carriage - rail)."""
     nodes, body = [], []
     for k, (lam, v) in enumerate(terms):
         aux = base + k
         nodes.append(f"{aux},0.,0.,0.")
-        body += [f"** {comment} term {k + 1}: c = {lam:.6g} on v = ({', '.join(f'{x:.6g}' for x in v)})",
-                 f"*ELEMENT,TYPE=DASHPOTA,ELSET=GFD{aux}", f"{aux},{aux},{ground}",
-                 f"*DASHPOT,ELSET=GFD{aux}", "", _ccx(lam)]
-        body += _equation(aux, v, cn, rn)
-    return nodes, body
-
-
-def _spring_terms(base: int, terms, cn, rn) -> tuple[list[str], list[str]]:
-    nodes, body = [], []
-    for k, (lam, v) in enumerate(terms):
-        aux = base + k
-        nodes.append(f"{aux},0.,0.,0.")
-        body += [f"** K term {k + 1}: k = {lam:.6g} on v = ({', '.join(f'{x:.6g}' for x in v)})",
-                 f"*ELEMENT,TYPE=SPRING1,ELSET=GFK{aux}", f"{aux},{aux}",
-                 f"*SPRING,ELSET=GFK{aux}", "1", _ccx(lam)]
+        head = f"** {comment} term {k + 1}: {'k' if ground is None else 'c'} = {lam:.6g} on v = ({', '.join(f'{x:.6g}' for x in v)})"
+        if ground is None:
+            body += [head, f"*ELEMENT,TYPE=SPRING1,ELSET=GFK{aux}", f"{aux},{aux}", f"*SPRING,ELSET=GFK{aux}", "1",
+                     _ccx(lam)]
+        else:
+            body += [head, f"*ELEMENT,TYPE=DASHPOTA,ELSET=GFD{aux}", f"{aux},{aux},{ground}",
+                     f"*DASHPOT,ELSET=GFD{aux}", "", _ccx(lam)]
         body += _equation(aux, v, cn, rn)
     return nodes, body
 
@@ -168,7 +162,7 @@ def _carriage_cards(elements: list[Element], element: str, rot_offset: int) -> t
         cn, rn = (e.carriage_node, e.carriage_node + rot_offset), (e.rail_node, e.rail_node + rot_offset)
         ground = e.element_id + 12
         if element == "matrix":
-            n, b = _spring_terms(e.element_id, _terms(e.stiffness), cn, rn)
+            n, b = _term_lines(e.element_id, _terms(e.stiffness), cn, rn, "K")
             nodes += n
             body += b
             aux_nodes += [e.element_id + k for k in range(len(n))]
@@ -182,7 +176,7 @@ def _carriage_cards(elements: list[Element], element: str, rot_offset: int) -> t
                              f"*SPRING,ELSET=GFK{eid}", f"{da},{db}", _ccx(k)]
         c_terms = _terms(e.damping) if element == "matrix" else [
             (float(e.damping[d, d]), np.eye(6)[d]) for d in range(6) if e.damping[d, d] != 0.0]
-        n, b = _damper_terms(e.element_id + 6, ground, c_terms, cn, rn, "C")
+        n, b = _term_lines(e.element_id + 6, c_terms, cn, rn, "C", ground)
         nodes += n
         body += b
         aux_nodes += [e.element_id + 6 + k for k in range(len(n))]
@@ -197,9 +191,9 @@ def _carriage_cards(elements: list[Element], element: str, rot_offset: int) -> t
                      f"{d},{d}", _ccx(e.stiffness[d - 1, d - 1])]
             c = float(e.damping[d - 1, d - 1])
             if c != 0.0:
-                n, b = _damper_terms(e.element_id + 1, ground, [(c, np.eye(6)[d - 1])],
-                                     (e.carriage_node, e.carriage_node), (e.rail_node, e.rail_node),
-                                     f"spring {i + 1} C")
+                n, b = _term_lines(e.element_id + 1, [(c, np.eye(6)[d - 1])],
+                                   (e.carriage_node, e.carriage_node), (e.rail_node, e.rail_node),
+                                   f"spring {i + 1} C", ground)
                 nodes += n
                 body += b
                 aux_nodes.append(e.element_id + 1)
