@@ -565,14 +565,17 @@ def _measure_mode(bins, mode, notes: list) -> list:
 
 def simulate_force_levels(guide="MRB35", effects=(), forces_n=(100.0, 1000.0, 5000.0), hits: int = 4,
                           record_s: float = 0.05, spread: float = 0.05, seed: int = 0, ideal: bool = False,
-                          run_name: str = "vertical", oversample: int = 4, sensor_layout: str | None = None):
+                          run_name: str = "vertical", oversample: int = 4, sensor_layout: str | None = None,
+                          acc_range_per_n: float = 0.5):
     """A recording of one hammer set-up hit at several force levels, one run per level.
 
     Each level is a :func:`guidefit.simulate.simulate` run (``run_name`` of
     :data:`guidefit.simulate.DEFAULT_RUNS`, renamed ``<run>_<F>N``) with peak
     forces drawn in ``F (1 +/- spread)`` and the ADC ranges set as an
     experimenter would for that force (force range the next power of two
-    above 1.5 F, at least 2048 N; acceleration range half that in m/s^2), so
+    above 1.5 F, at least 2048 N; acceleration range ``acc_range_per_n`` times
+    that in m/s^2, default half: a carriage of about 2 kg such as MRB35; a
+    lighter carriage needs more, e.g. 4 for a 0.6 kg ball carriage), so
     nothing clips. ``oversample``: the simulator's internal rate / sample
     rate (its RK4 step). Returns ``(RecordingData, truth per level)``.
     """
@@ -590,7 +593,7 @@ def simulate_force_levels(guide="MRB35", effects=(), forces_n=(100.0, 1000.0, 50
         name = f"{run_name}_{force:g}N"
         cfg = SimulationConfig(runs=(replace(base[run_name], name=name),), hits=hits, record_s=record_s,
                                force_n=(force * (1 - spread), force * (1 + spread)),
-                               force_range_n=full, acc_range_m_s2=full / 2, oversample=oversample,
+                               force_range_n=full, acc_range_m_s2=full * acc_range_per_n, oversample=oversample,
                                sensor_layout=sensor_layout)
         data, truth = simulate(guide, effects, cfg.ideal() if ideal else cfg, seed=seed + 1000 * level)
         runs += list(data.runs)

@@ -84,3 +84,30 @@ def test_describing_function_below_lift_off_is_the_static_curvature(ball, name):
     expected = 1 + curvature * r[sel] ** 2 / 8
     # the r^4 term: |D - expected| < r^4 / 100 for either law (its coefficient is below 0.002)
     assert np.all(np.abs(table[sel] - expected) < r[sel] ** 4 / 100 + 1e-9)
+
+
+def test_force_level_fit_recovers_a_ball_guides_preload(ball, tmp_path):
+    # three runs of the vertical hit at 300, 1500 and 4000 N on the 0.6 kg four-row carriage (preload
+    # 6.6 um, nominal); accelerometer range 4 m/s^2 per N so that nothing clips. The forward model with the
+    # ball law predicts the levels (the 4 kN level 35 Hz low from contact loss) and the fit of preload and
+    # K_n factor recovers both (seeded: p 0.99 +/- 0.06, k 1.004 +/- 0.031)
+    from guidefit.identify import IdentifySettings, identify
+    from guidefit.recording import write_recording
+
+    path = tmp_path / "ball_levels.h5"
+    data, _ = nonlinear.simulate_force_levels(ball, ["amplitude_dependence:preload_factor=1"], (300.0, 1500.0, 4000.0),
+                                              hits=2, record_s=0.02, seed=3, oversample=2, acc_range_per_n=4.0)
+    write_recording(path, data)
+    notes = []
+    levels = nonlinear.measure_levels(identify(path, guide=ball, settings=IdentifySettings(force_levels=True)),
+                                      notes=notes)
+    assert not notes and len(levels) == 3
+    f = [lv.frequency_hz for lv in levels]
+    assert f[0] - f[2] > 20.0  # contact loss at 4 kN
+    fm = nonlinear.ForwardModel(ball, levels, n_hits=1)
+    for lv, p in zip(levels, fm.predict(1.0)):
+        assert abs(p.frequency_hz - lv.frequency_hz) < 2 * lv.sigma_hz()
+    fit = nonlinear.fit_levels(levels, ball, fit_kn=True, n_hits=1, forward=fm)
+    assert abs(fit.preload_factor - 1.0) < 3 * fit.preload_std and fit.preload_std < 0.1
+    assert abs(fit.kn_factor - 1.0) < 3 * fit.kn_std and fit.kn_std < 0.05
+    assert fit.within_uncertainty
