@@ -1,7 +1,8 @@
 r"""Nonlinear contacts: a forward model of hits at several force levels.
 
-A preloaded Hertz roller (Palmgren, Eq. 4: ``Q = C delta^(10/9)`` for
-``delta > 0``, see :mod:`guidefit.model.static`) softens as a hit unloads it
+A preloaded Hertz contact (``Q = C delta^e`` for ``delta > 0``: Palmgren's
+roller law, Eq. 4, ``e = 10/9``; Hertz point contact of a ball, Eq. 3,
+``e = 3/2``; :func:`guidefit.model.static.exponent`) softens as a hit unloads it
 and carries nothing once it lifts off. A carriage hit harder and harder
 therefore rings at a lower and lower *apparent* frequency: with the MRB35
 preload, a 1 kN hit lifts nearly every roller during its first cycles, and
@@ -23,7 +24,8 @@ simulation of the same experiment, passed through the same chain:
    moves continuously with the model's parameters where a one-pole fit
    jumps between the lobes of a peak split by contact loss.
 2. **Forward model** (:class:`ForwardModel`). For a preload factor ``p``
-   (``Delta' = p Delta``) and a roller-stiffness factor ``k`` (``K_n`` scaled),
+   (``Delta' = p Delta``, small-amplitude ``K_n`` scaled by ``p^(e-1)``,
+   :func:`stiffness_slope`) and a roller-stiffness factor ``k`` (``K_n`` scaled),
    each level's hits are simulated in the time domain with the preloaded
    Hertz law (:func:`guidefit.simulate.hit_response`, the simulator's RK4
    integrator, exact linear decay once every roller's excursion is below
@@ -380,6 +382,11 @@ class ForwardModel:
         self.evaluations = 0
         self.seconds = 0.0
 
+    @property
+    def stiffness_slope(self) -> float:
+        """d ln K_n / d ln delta of the guide's contact law (:func:`stiffness_slope`: 1/9 rollers, 1/2 balls)."""
+        return stiffness_slope(self.guide)
+
     def model(self, preload_factor: float, kn_factor: float = 1.0):
         """The simulator's model with nonlinear contacts at these parameters."""
         from guidefit.model.effects import Effect
@@ -558,14 +565,17 @@ def _measure_mode(bins, mode, notes: list) -> list:
 
 def simulate_force_levels(guide="MRB35", effects=(), forces_n=(100.0, 1000.0, 5000.0), hits: int = 4,
                           record_s: float = 0.05, spread: float = 0.05, seed: int = 0, ideal: bool = False,
-                          run_name: str = "vertical", oversample: int = 4, sensor_layout: str | None = None):
+                          run_name: str = "vertical", oversample: int = 4, sensor_layout: str | None = None,
+                          acc_range_per_n: float = 0.5):
     """A recording of one hammer set-up hit at several force levels, one run per level.
 
     Each level is a :func:`guidefit.simulate.simulate` run (``run_name`` of
     :data:`guidefit.simulate.DEFAULT_RUNS`, renamed ``<run>_<F>N``) with peak
     forces drawn in ``F (1 +/- spread)`` and the ADC ranges set as an
     experimenter would for that force (force range the next power of two
-    above 1.5 F, at least 2048 N; acceleration range half that in m/s^2), so
+    above 1.5 F, at least 2048 N; acceleration range ``acc_range_per_n`` times
+    that in m/s^2, default half: a carriage of about 2 kg such as MRB35; a
+    lighter carriage needs more, e.g. 4 for a 0.6 kg ball carriage), so
     nothing clips. ``oversample``: the simulator's internal rate / sample
     rate (its RK4 step). Returns ``(RecordingData, truth per level)``.
     """
@@ -583,7 +593,7 @@ def simulate_force_levels(guide="MRB35", effects=(), forces_n=(100.0, 1000.0, 50
         name = f"{run_name}_{force:g}N"
         cfg = SimulationConfig(runs=(replace(base[run_name], name=name),), hits=hits, record_s=record_s,
                                force_n=(force * (1 - spread), force * (1 + spread)),
-                               force_range_n=full, acc_range_m_s2=full / 2, oversample=oversample,
+                               force_range_n=full, acc_range_m_s2=full * acc_range_per_n, oversample=oversample,
                                sensor_layout=sensor_layout)
         data, truth = simulate(guide, effects, cfg.ideal() if ideal else cfg, seed=seed + 1000 * level)
         runs += list(data.runs)
@@ -645,16 +655,33 @@ class NonlinearFit:
                 "seconds": self.seconds, "levels": self.rows()}
 
 
-def _params(theta, fit_kn: bool, kn_fixed: float) -> tuple[float, float]:
-    """(p, k) from the fit coordinates (ln p, ln of the small-amplitude stiffness factor k p^(1/9))."""
+def stiffness_slope(guide) -> float:
+    """d ln K_n / d ln delta of the guide's contact law, ``e - 1`` (:func:`guidefit.model.static.exponent`).
+
+    1/9 for rollers (Eq. 4, ``K_n ~ delta^(1/9)``), 1/2 for balls (Eq. 3,
+    ``K_n ~ delta^(1/2)``): a preload factor p scales the small-amplitude
+    element stiffness by ``p^slope``.
+
+    >>> from guidefit.model.guides import load_guide
+    >>> round(stiffness_slope(load_guide("MRB35")), 4)
+    0.1111
+    """
+    from guidefit.model import static
+
+    return static.exponent(guide) - 1.0
+
+
+def _params(theta, fit_kn: bool, kn_fixed: float, slope: float) -> tuple[float, float]:
+    """(p, k) from the fit coordinates (ln p, ln of the small-amplitude stiffness factor k p^slope),
+    ``slope`` the guide's :func:`stiffness_slope`."""
     p = math.exp(theta[0])
     if not fit_kn:
         return p, kn_fixed
-    return p, float(np.clip(math.exp(theta[1]) / p ** (1.0 / 9.0), *KN_BOUNDS))
+    return p, float(np.clip(math.exp(theta[1]) / p**slope, *KN_BOUNDS))
 
 
 def _residuals(fm: ForwardModel, f_meas, sigma, theta, fit_kn: bool, kn_fixed: float, n_hits=None):
-    p, k = _params(theta, fit_kn, kn_fixed)
+    p, k = _params(theta, fit_kn, kn_fixed, fm.stiffness_slope)
     try:
         pred = fm.predict(p, k, n_hits)
     except (IdentificationError, ModelError):
@@ -674,7 +701,7 @@ def _first_guess(fm: ForwardModel, f_meas, sigma, lowest: int) -> tuple[float, f
     for p in PRELOAD_GRID:
         try:
             k = k_of(p)
-            r = _residuals(fm, f_meas, sigma, np.log([p, k * p ** (1.0 / 9.0)]), True, k, n_hits=1)
+            r = _residuals(fm, f_meas, sigma, np.log([p, k * p**fm.stiffness_slope]), True, k, n_hits=1)
             costs.append(float(r @ r))
         except ModelError:
             costs.append(math.inf)
@@ -709,11 +736,13 @@ def fit_levels(levels, guide="MRB35", fit_kn: bool = True, kn_factor: float = 1.
     sigma = np.array([lv.sigma_hz() for lv in levels])
     lowest = int(np.argmin([lv.peak_force_n for lv in levels]))
     p0, k0 = _first_guess(fm, f_meas, sigma, lowest)
-    # coordinates: ln p and ln of the small-amplitude stiffness factor k p^(1/9) (Eq. 4: K_n ~ Delta^(1/9)),
-    # which the lowest level fixes nearly alone: the two are then almost uncorrelated
-    x0 = np.log([p0, k0 * p0 ** (1.0 / 9.0)]) if fit_kn else np.log([p0])
-    lo = np.log([PRELOAD_BOUNDS[0], KN_BOUNDS[0] * PRELOAD_BOUNDS[0] ** (1 / 9)][: x0.size])
-    hi = np.log([PRELOAD_BOUNDS[1], KN_BOUNDS[1] * PRELOAD_BOUNDS[1] ** (1 / 9)][: x0.size])
+    # coordinates: ln p and ln of the small-amplitude stiffness factor k p^s, s = e - 1 of the guide's law
+    # (Eq. 4 rollers: K_n ~ Delta^(1/9); Eq. 3 balls: K_n ~ Delta^(1/2)), which the lowest level fixes nearly
+    # alone: the two are then almost uncorrelated
+    s = fm.stiffness_slope
+    x0 = np.log([p0, k0 * p0**s]) if fit_kn else np.log([p0])
+    lo = np.log([PRELOAD_BOUNDS[0], KN_BOUNDS[0] * PRELOAD_BOUNDS[0] ** s][: x0.size])
+    hi = np.log([PRELOAD_BOUNDS[1], KN_BOUNDS[1] * PRELOAD_BOUNDS[1] ** s][: x0.size])
     res = least_squares(lambda th: _residuals(fm, f_meas, sigma, th, fit_kn, kn_factor), np.clip(x0, lo, hi),
                         bounds=(lo, hi), diff_step=1e-2, x_scale=1.0, xtol=1e-3, ftol=1e-6, max_nfev=30)
     chi2 = float(res.fun @ res.fun)
@@ -724,11 +753,11 @@ def fit_levels(levels, guide="MRB35", fit_kn: bool = True, kn_factor: float = 1.
     except np.linalg.LinAlgError:
         cov = np.full((x0.size, x0.size), math.inf)
         std = np.full(x0.size, math.inf)
-    p, k = _params(res.x, fit_kn, kn_factor)
+    p, k = _params(res.x, fit_kn, kn_factor, s)
     pred = fm.predict(p, k)
     k_std = None
-    if fit_kn:  # ln k = theta_1 - theta_0 / 9
-        grad = np.array([-1.0 / 9.0, 1.0])
+    if fit_kn:  # ln k = theta_1 - s theta_0
+        grad = np.array([-s, 1.0])
         k_std = k * math.sqrt(max(float(grad @ cov @ grad), 0.0)) if np.all(np.isfinite(std)) else math.inf
     return NonlinearFit(p, p * float(std[0]), k, k_std, tuple(levels),
                         tuple(pred), tuple(float(s) for s in sigma), chi2, dof, fm.evaluations,

@@ -37,7 +37,8 @@ acceleration of sensor ``r`` (point ``p_r``, axis ``d_r``) is
 *Nonlinear contacts* (effect ``amplitude_dependence``). Every roller is a
 preloaded Hertz line contact, ``Q_i = C_i delta_i^(10/9)`` for
 ``delta_i > 0`` and 0 otherwise (Palmgren, Eq. 4; two contacts in series keep
-the exponent), with ``delta_i = Delta' - g_i . q``, ``Delta'`` the guide's
+the exponent), every ball of a ball guide a Hertz point contact,
+``Q_i = C_i delta_i^(3/2)`` (Eq. 3; :func:`guidefit.model.static.exponent`), with ``delta_i = Delta' - g_i . q``, ``Delta'`` the guide's
 preload times ``preload_factor`` and ``C_i`` calibrated so that at the
 nominal preload the tangent stiffness is roller i's K_n of the linear model
 (:func:`guidefit.model.static.contact_constant`, calibration 'nominal': the
@@ -333,10 +334,10 @@ class _Model:
 
 @dataclass(frozen=True)
 class _Contacts:
-    """Nonlinear preloaded Hertz roller contacts around the static equilibrium q0."""
+    """Nonlinear preloaded Hertz contacts (rollers or balls) around the static equilibrium q0."""
 
     G: np.ndarray  # (N, n) roller gradients over the model DOFs
-    C: np.ndarray  # (N,) law constants, Q = C delta^(10/9)
+    C: np.ndarray  # (N,) law constants, Q = C delta^e (e = exponent)
     delta0: np.ndarray  # (N,) roller approach at q = 0
     K_ground: np.ndarray  # (n, n) linear springs of the support body to ground
     M: np.ndarray
@@ -345,7 +346,7 @@ class _Contacts:
     K_lin: np.ndarray  # (n, n) tangent stiffness at q0
     q0: np.ndarray  # (n,) static equilibrium
     preload_m: float  # Delta'
-    exponent: float = PALMGREN_EXPONENT
+    exponent: float = PALMGREN_EXPONENT  # the guide's, static.exponent: 10/9 rollers, 3/2 balls
 
     def force(self, q: np.ndarray) -> np.ndarray:
         """Generalised restoring force of rollers and ground springs at q (N, N m)."""

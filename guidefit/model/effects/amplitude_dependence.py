@@ -1,11 +1,13 @@
 r"""``amplitude_dependence``: nonlinear preloaded Hertz contacts; frequencies fall as hits unload the rows.
 
-Each roller follows Palmgren's preloaded line-contact law ``Q = C delta^(10/9)``
+Each element follows the guide's preloaded contact law ``Q = C delta^e``
 (:func:`guidefit.model.static.roller_force`, calibration "nominal": K_n at
-the guide's preload equals the vibration model's). With preload
-``Delta' = p Delta`` (``p`` = ``preload_factor``) the small-amplitude roller
-stiffness is ``K_n p^(1/9)`` (Eq. 4: ``K_n ~ delta^(1/9)``): that is the
-linear model (``apply``).
+the guide's preload equals the vibration model's): Palmgren's line contact,
+``e = 10/9``, for rollers (Eq. 4), Hertz point contact, ``e = 3/2``, for balls
+(Eq. 3); :func:`guidefit.model.static.exponent`. With preload
+``Delta' = p Delta`` (``p`` = ``preload_factor``) the small-amplitude element
+stiffness is ``K_n p^(e-1)`` (rollers ``K_n ~ delta^(1/9)``, balls
+``K_n ~ delta^(1/2)``): that is the linear model (``apply``).
 
 Tried only where there is force-level information whose frequencies change
 with hit force (``gate``), and accepted only when the fitted preload itself
@@ -18,7 +20,7 @@ F and duration T with modal amplitude ``A_m = |b_m| F |P(w_m)| / w_m``,
 decaying as ``exp(-zeta_m w_m t)``; roller i moves with the RMS sum
 ``a_i(t) = sqrt(sum_m (g_i . phi_m A_m(t))^2)``; mode j's frequency at time
 t is the Rayleigh quotient with each roller's describing-function stiffness
-``k_eq(a) = K_n p^(1/9) D(a/Delta')`` at ``a_i(t)``; the chirped decay is
+``k_eq(a) = K_n p^(e-1) D(a/Delta')`` at ``a_i(t)``; the chirped decay is
 fitted by one pole in the band of identify's refit. Every prediction carries
 a model-form error of :data:`AMPLITUDE_MODEL_FORM` of its predicted shift
 (docs/explain.md, "Amplitude dependence").
@@ -48,7 +50,8 @@ _DF_CACHE: dict = {}
 
 
 def apply(spec, guide, p):
-    """Small-amplitude (linearised) model: K_n ~ Delta^(1/9), Eq. (4) (Delta^(1/2) for balls, Eq. 3)."""
+    """Small-amplitude (linearised) model: K_n ~ Delta^(e-1): Delta^(1/9) for rollers, Eq. (4), Delta^(1/2) for
+    balls, Eq. (3)."""
     from guidefit.model import static
 
     return vib.scale_roller_stiffness(spec, p["preload_factor"] ** (static.exponent(guide) - 1.0))
@@ -60,7 +63,8 @@ def effective_force(hit_forces_n) -> float:
     H1 = sum X F* / sum |F|^2 weights each hit's FRF by its force squared, so
     the fitted frequency is about the F^2-weighted mean of the hits'
     frequencies; with ``f(F) = f0 - c F^2`` (the describing function below
-    lift-off, ``1 - r^2/81``) that is ``f(F_eff)``,
+    lift-off, ``1 + (e-1)(e-2) r^2/8``: ``1 - r^2/81`` for rollers, ``1 - r^2/32`` for
+    balls) that is ``f(F_eff)``,
     ``F_eff = sqrt(sum F^4 / sum F^2)``: above the mean force when the
     forces spread.
 
@@ -74,10 +78,14 @@ def effective_force(hit_forces_n) -> float:
 
 
 def describing_function_table(guide):
-    """(ln r, D(r)): D = k_eq(a) / K_n(Delta) with r = a / Delta, the first harmonic of the roller law."""
+    """(ln r, D(r)): D = k_eq(a) / K_n(Delta) with r = a / Delta, the first harmonic of the guide's contact law.
+
+    Below lift-off (r < 1) ``D = 1 + (e-1)(e-2) r^2/8 + O(r^4)`` for ``Q = C delta^e``
+    (:func:`guidefit.model.static.exponent`): ``1 - r^2/81`` for rollers, ``1 - r^2/32`` for balls.
+    """
     from guidefit.model import static
 
-    key = (guide.name, guide.preload_m, guide.roller_stiffness_n_per_m)
+    key = (guide.name, guide.preload_m, guide.roller_stiffness_n_per_m, static.exponent(guide))
     if key in _DF_CACHE:
         return _DF_CACHE[key]
     delta = guide.preload_m
@@ -336,8 +344,9 @@ EFFECT = EffectDef(
     variants=variants,
     doc=DocRow("only with force levels that show a trend with hit force, and a preload",
                "`preload_factor` (0.01 - 10)",
-               "nonlinear preloaded Hertz rollers: the frequency falls once hits unload rows; small-amplitude "
-               "K_n scales as `preload_factor^(1/9)`; accepted only when the fit predicts the levels' trend"),
+               "nonlinear preloaded Hertz contacts: the frequency falls once hits unload rows; small-amplitude "
+               "K_n scales as `preload_factor^(1/9)` (rollers) or `preload_factor^(1/2)` (balls); accepted only "
+               "when the fit predicts the levels' trend"),
     order=40,
     gate=gate,
     forward=forward,
