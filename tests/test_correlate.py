@@ -287,3 +287,53 @@ def test_ccx_frd_equals_the_dat_of_the_same_run(tmp_path):
     assert [r["fe_mode"] for r in result.rows] == list(range(1, 13))
     assert max(abs(r["error_pct"]) for r in result.rows) < 1e-4
     assert min(r["mac"] for r in result.rows) > 0.99999
+
+
+@pytest.fixture(scope="module")
+def frf_uff(tmp_path_factory):
+    """FRFs (UFF-58) of a simulated MRB35 recording, two references (vertical and lateral hits)."""
+    where = tmp_path_factory.mktemp("frf")
+    rec, uff = where / "r.h5", where / "r.uff"
+    out = CliRunner().invoke(main, ["simulate", "--guide", "MRB35", "--out", str(rec), "--hits", "4"])
+    assert out.exit_code == 0, out.output
+    out = CliRunner().invoke(main, ["frf", str(rec), "--out", str(uff)])
+    assert out.exit_code == 0, out.output
+    return uff
+
+
+def test_uff58_frfs_fitted_by_the_global_estimator_pair_by_mac(tmp_path, frf_uff):
+    """The model's modes (shuffled, under other point names) against FRFs simulated from it: MAC pairs, ~0 %."""
+    freqs, shapes, labels = _model_modes()
+    order = [2, 4, 0, 3, 1]
+    names = {p: f"n{k}" for k, p in enumerate(shapes)}
+    fe = _csv(tmp_path / "fe.csv", freqs[order], {p: s[order] for p, s in shapes.items()}, names,
+              [labels[k] for k in order])
+    pmap = tmp_path / "map.txt"
+    pmap.write_text("".join(f"{p} = {n}\n" for p, n in names.items()))
+    out = _invoke(fe, frf_uff, "--point-map", pmap, "--json", "--check", "max_error_pct=0.05,min_mac=0.99")
+    assert out.exit_code == 0, out.output
+    doc = json.loads(out.stdout)
+    assert doc["paired_by"] == "mac" and set(doc["common_points"]) == set("ABCD")
+    assert len(doc["modes"]) == 5
+    for row, k in zip(doc["modes"], range(5)):  # test modes in frequency order: model mode k is FE row order.index(k)
+        assert row["fe_mode"] == order.index(k) + 1
+        assert row["test_hz"] == pytest.approx(freqs[k], rel=1e-4)
+        assert abs(row["error_pct"]) < 0.05 and row["mac"] > 0.99
+    # one axis per reference (y in the vertical run, x in the lateral one): the rolls and the lateral motion look
+    # alike at four x DOFs; the pairing says so and falls back on frequency among them
+    assert any("alike" in w for w in doc["warnings"])
+
+
+def test_uff58_frfs_against_frequencies_only_pair_by_order(tmp_path, frf_uff):
+    """A CSV of the model frequencies alone: pairing by order, with the warning; a wrong model shows its error."""
+    freqs, _, _ = _model_modes()
+    fe = tmp_path / "fe.csv"
+    fe.write_text("frequency_hz\n" + "".join(f"{1.05 * float(f)!r}\n" for f in freqs))
+    out = _invoke(fe, frf_uff, "--json")
+    assert out.exit_code == 0, out.output
+    doc = json.loads(out.stdout)
+    assert doc["paired_by"] == "order" and "no shapes on the FE side" in doc["warnings"][0]
+    assert [r["fe_mode"] for r in doc["modes"]] == [1, 2, 3, 4, 5]
+    assert all(r["error_pct"] == pytest.approx(5.0, abs=0.05) for r in doc["modes"])
+    out = _invoke(fe, frf_uff, "--band", "8000,100")
+    assert out.exit_code == 2 and "--band" in out.output and len(out.output.strip().splitlines()) == 1
