@@ -216,6 +216,19 @@ def read_test_frfs(path, fe: FEModes, band_hz: tuple | None = None) -> FEModes:
     return FEModes(freqs, shapes, str(path))
 
 
+def _has_uff55(path) -> bool:
+    """A UFF file with datasets 55 (mode shapes): they are the test modes, its FRFs are not refitted."""
+    if Path(path).suffix.lower() not in (".uff", ".unv"):
+        return False
+    from guidefit.errors import RecordingError
+    from guidefit.io.uff import open_uff
+
+    try:
+        return 55 in open_uff(str(path))[1]
+    except RecordingError:
+        return False
+
+
 def read_test(path, fe: FEModes | None = None, band_hz: tuple | None = None) -> FEModes:
     """The test side of ``correlate``, by suffix; FRFs (UFF-58, frf.h5) are fitted in the FE modes' band."""
     from guidefit.io.frf_files import holds_frfs
@@ -223,7 +236,7 @@ def read_test(path, fe: FEModes | None = None, band_hz: tuple | None = None) -> 
     suffix = Path(path).suffix.lower()
     if suffix in (".json", ".jsonl"):
         return read_test_json(path)
-    if suffix in (".uff", ".unv", ".h5", ".hdf5") and holds_frfs(path):
+    if suffix in (".uff", ".unv", ".h5", ".hdf5") and holds_frfs(path) and not _has_uff55(path):
         if fe is None:
             raise CorrelateError(f"{path}: FRFs are fitted in the FE modes' band; give the FE side")
         return read_test_frfs(path, fe, band_hz)

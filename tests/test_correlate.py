@@ -337,3 +337,10 @@ def test_uff58_frfs_against_frequencies_only_pair_by_order(tmp_path, frf_uff):
     assert all(r["error_pct"] == pytest.approx(5.0, abs=0.05) for r in doc["modes"])
     out = _invoke(fe, frf_uff, "--band", "8000,100")
     assert out.exit_code == 2 and "--band" in out.output and len(out.output.strip().splitlines()) == 1
+
+
+def test_uff58_frfs_that_end_below_the_fe_modes_are_one_line_exit_2(tmp_path, frf_uff):
+    fe = tmp_path / "fe.csv"
+    fe.write_text("frequency_hz\n200000\n300000\n")
+    out = _invoke(fe, frf_uff)
+    assert out.exit_code == 2 and "--band" in out.output and len(out.output.strip().splitlines()) == 1
