@@ -1,9 +1,12 @@
 r"""Test-analysis correlation: the paper's Table 3 for any structure (``guidefit correlate FE TEST``).
 
-FE side: :func:`guidefit.io.fe_results.read_fe` (CalculiX ``.dat``, Nastran
-``.f06``/``.op2``, CSV). Test side: UFF-55 mode shapes (``.uff``/``.unv``),
-guidefit JSON results (``identify --json``: modes with ``frequency_hz`` and
-``shape``), or a CSV of measured frequencies (and shapes).
+FE side: :func:`guidefit.io.fe_results.read_fe` (CalculiX ``.dat``/``.frd``,
+Nastran ``.f06``/``.op2``, CSV). Test side: UFF-55 mode shapes
+(``.uff``/``.unv``), measured FRFs (UFF-58 function type 4, any number of
+references, or guidefit's ``frf.h5``) fitted by guidefit's global estimator
+(:func:`read_test_frfs`), guidefit JSON results (``identify --json``: modes
+with ``frequency_hz`` and ``shape``), or a CSV of measured frequencies (and
+shapes).
 
 Pairing: where both sides have shapes at common points (names equal, or
 mapped by a point-map file: lines ``test_point = fe_point``), each test mode
@@ -238,7 +241,8 @@ def read_test(path, fe: FEModes | None = None, band_hz: tuple | None = None) -> 
         return read_test_json(path)
     if suffix in (".uff", ".unv", ".h5", ".hdf5") and holds_frfs(path) and not _has_uff55(path):
         if fe is None:
-            raise CorrelateError(f"{path}: FRFs are fitted in the FE modes' band; give the FE side")
+            raise CorrelateError(f"{path}: holds FRFs, fitted in the FE modes' band, which is not known here: give "
+                                 "the measured modes (UFF-55, guidefit JSON or CSV)")
         return read_test_frfs(path, fe, band_hz)
     if suffix in (".uff", ".unv"):
         return read_test_uff(path)
