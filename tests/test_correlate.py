@@ -344,3 +344,34 @@ def test_uff58_frfs_that_end_below_the_fe_modes_are_one_line_exit_2(tmp_path, fr
     fe.write_text("frequency_hz\n200000\n300000\n")
     out = _invoke(fe, frf_uff)
     assert out.exit_code == 2 and "--band" in out.output and len(out.output.strip().splitlines()) == 1
+
+
+@pytest.fixture(scope="module")
+def frf_both(tmp_path_factory):
+    """FRFs of a recording with x and y at A-D in both runs (UFF-58 and guidefit's frf.h5): references linked."""
+    where = tmp_path_factory.mktemp("frfboth")
+    rec = where / "r.h5"
+    out = CliRunner().invoke(main, ["simulate", "--guide", "MRB35", "--out", str(rec), "--hits", "4",
+                                    "--sensors", "both"])
+    assert out.exit_code == 0, out.output
+    for name in ("r.uff", "frf.h5"):
+        out = CliRunner().invoke(main, ["frf", str(rec), "--out", str(where / name)])
+        assert out.exit_code == 0, out.output
+    return where / "r.uff", where / "frf.h5"
+
+
+@pytest.mark.parametrize("which", [0, 1])
+def test_frfs_of_references_sharing_sensors_give_whole_shapes(tmp_path, frf_both, which):
+    """Two references measured at the same 8 DOFs: one rank-one shape per mode, MAC 1 to its own model mode only."""
+    freqs, shapes, _ = _model_modes()
+    order = [4, 3, 2, 1, 0]
+    fe = _csv(tmp_path / "fe.csv", freqs[order], {p: s[order] for p, s in shapes.items()})
+    out = _invoke(fe, frf_both[which], "--json", "--check", "max_error_pct=0.01,min_mac=0.999")
+    assert out.exit_code == 0, out.output
+    doc = json.loads(out.stdout)
+    assert doc["paired_by"] == "mac" and doc["warnings"] == []
+    assert [r["fe_mode"] for r in doc["modes"]] == [order.index(k) + 1 for k in range(5)]
+    mac_matrix = np.array(doc["mac_matrix"])  # FE x test: off the pairs below 0.02
+    paired = np.zeros_like(mac_matrix, dtype=bool)
+    paired[[r["fe_mode"] - 1 for r in doc["modes"]], [r["test_mode"] - 1 for r in doc["modes"]]] = True
+    assert mac_matrix[~paired].max() < 0.02
