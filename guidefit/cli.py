@@ -714,10 +714,13 @@ def export_cmd(results, fmt, joint, explain_paths, guide_name, element, units, a
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), help="The MAC matrix as .png, .pdf or .svg.")
 @click.option("--check", "checks", metavar="max_error_pct=N,min_mac=N",
               help="Exit 1 when a pair's |Eq. 34 error| or MAC is out of tolerance.")
-def correlate_cmd(fe_path, test_path, point_map, as_json, plot_path, checks):
+@click.option("--band", "band", metavar="LO,HI",
+              help="Hz where measured FRFs are fitted [default: 0.5x the lowest to 1.5x the highest FE mode].")
+def correlate_cmd(fe_path, test_path, point_map, as_json, plot_path, checks, band):
     """FE against test natural frequencies (paper Table 3): Eq. 34 error and MAC per mode pair.
 
-    FE: CalculiX .dat, Nastran .f06/.op2, or CSV; TEST: UFF-55 (.uff/.unv), guidefit JSON, or CSV.
+    FE: CalculiX .dat/.frd, Nastran .f06/.op2, or CSV; TEST: UFF-55 shapes or UFF-58 FRFs (.uff/.unv; FRFs
+    fitted by the global estimator), guidefit frf.h5, guidefit JSON, or CSV.
     """
     import json
 
@@ -726,7 +729,7 @@ def correlate_cmd(fe_path, test_path, point_map, as_json, plot_path, checks):
     _plot_file(plot_path)
     _refuse([plot_path], [fe_path, test_path, point_map])
     tolerances = corr.parse_checks(checks)
-    result = corr.run(fe_path, test_path, point_map)
+    result = corr.run(fe_path, test_path, point_map, corr.parse_band(band))
     if plot_path:
         with _written(plot_path) as tmp:
             corr.plot_mac(result, tmp)

@@ -1,9 +1,12 @@
 r"""Test-analysis correlation: the paper's Table 3 for any structure (``guidefit correlate FE TEST``).
 
-FE side: :func:`guidefit.io.fe_results.read_fe` (CalculiX ``.dat``, Nastran
-``.f06``/``.op2``, CSV). Test side: UFF-55 mode shapes (``.uff``/``.unv``),
-guidefit JSON results (``identify --json``: modes with ``frequency_hz`` and
-``shape``), or a CSV of measured frequencies (and shapes).
+FE side: :func:`guidefit.io.fe_results.read_fe` (CalculiX ``.dat``/``.frd``,
+Nastran ``.f06``/``.op2``, CSV). Test side: UFF-55 mode shapes
+(``.uff``/``.unv``), measured FRFs (UFF-58 function type 4, any number of
+references, or guidefit's ``frf.h5``) fitted by guidefit's global estimator
+(:func:`read_test_frfs`), guidefit JSON results (``identify --json``: modes
+with ``frequency_hz`` and ``shape``), or a CSV of measured frequencies (and
+shapes).
 
 Pairing: where both sides have shapes at common points (names equal, or
 mapped by a point-map file: lines ``test_point = fe_point``), each test mode
@@ -37,6 +40,10 @@ from guidefit.errors import GuidefitError
 from guidefit.io.fe_results import FEModes, FEResultError, read_fe, read_modes_csv
 
 CHECKS = ("max_error_pct", "min_mac")
+#: weight of |ln(f_FE / f_test)| against MAC in the pairing: a tie-break between FE modes of equal MAC
+FREQUENCY_TIE_BREAK = 0.01
+#: another FE mode's MAC this close to the pair's: the shapes cannot tell them apart (a warning)
+MAC_ALIKE = 0.01
 
 
 class CorrelateError(GuidefitError, ValueError):
@@ -111,17 +118,138 @@ def read_test_uff(path) -> FEModes:
     return FEModes(freqs, shapes, str(path))
 
 
-def read_test(path) -> FEModes:
-    """The test side of ``correlate``, by suffix."""
+def fit_band(fe: FEModes, frequency_hz: np.ndarray) -> tuple[float, float]:
+    """The band an FRF fit covers by default: the FE modes' range, 0.5x below and 1.5x above, in the data."""
+    f = np.asarray(frequency_hz, float)
+    lo = max(0.5 * float(np.min(fe.frequencies_hz)), float(f[f > 0][0]) if np.any(f > 0) else 0.0)
+    return lo, min(1.5 * float(np.max(fe.frequencies_hz)), 0.8 * float(f[-1]))
+
+
+def _dof(channel: str, direction) -> tuple[str, int, float] | None:
+    """(point, axis, sign) of a response channel ``acc_<point>_<axis>`` along a global axis; ``N101`` is ``101``."""
+    split = _split_channel(channel)
+    d = np.asarray(direction, float)
+    if split is None or not np.all(np.isfinite(d)) or not np.any(d):
+        return None
+    axis = int(np.argmax(np.abs(d)))
+    point = split[0][1:] if re.fullmatch(r"N\d+", split[0]) else split[0]
+    return point, axis, float(np.sign(d[axis]))
+
+
+def _rank_one(R: np.ndarray, start: int, iterations: int = 50) -> np.ndarray:
+    """psi of R ~ psi L^T over R's finite entries (DOFs x references), from column ``start``; NaN where unlinked."""
+    seen = np.isfinite(R)
+    linked, cols = seen[:, start].copy(), {start}
+    while True:  # the references that share a response DOF with those taken, and their DOFs
+        more = {j for j in range(R.shape[1]) if j not in cols and np.any(seen[:, j] & linked)}
+        if not more:
+            break
+        cols |= more
+        linked |= np.any(seen[:, sorted(more)], axis=1)
+    cols = sorted(cols)
+    A, W = np.where(seen, R, 0.0)[np.ix_(linked, cols)], seen[np.ix_(linked, cols)]
+    psi, L = A[:, cols.index(start)].copy(), np.zeros(len(cols), complex)
+    for _ in range(iterations):  # alternating least squares on the observed entries
+        L = (np.conj(psi) @ A) / np.maximum((np.abs(psi) ** 2) @ W, 1e-300)
+        psi = (A @ np.conj(L)) / np.maximum(W @ (np.abs(L) ** 2), 1e-300)
+    out = np.full(R.shape[0], np.nan, complex)
+    out[linked] = psi
+    return out
+
+
+def read_test_frfs(path, fe: FEModes, band_hz: tuple | None = None) -> FEModes:
+    """Modes of measured FRFs (UFF-58 type 4 or guidefit's frf.h5) by guidefit's global estimator.
+
+    All runs (one per reference) are fitted together
+    (:func:`guidefit.globalfit.global_fit`: LSCF stabilisation diagram, pole
+    selection, shared-pole least squares) in ``band_hz`` (default
+    :func:`fit_band` of the FE modes). Each mode's shape at the response DOFs
+    is the rank-one fit psi L^T of its residues (DOFs x references) over the
+    references linked to the one that shows the mode most by a common
+    response DOF; DOFs only other references measure are NaN for that mode
+    (their scale relative to it is unknown), made real by the best phase.
+    """
+    from guidefit.errors import GuidefitError as _Error
+    from guidefit.globalfit import global_fit
+    from guidefit.io.frf_files import read_frf_file
+    from guidefit.modeshapes import real_shape
+
+    try:
+        frfs = read_frf_file(path)
+    except _Error as exc:
+        raise CorrelateError(str(exc)) from None
+    runs = {run.name: (run, s) for run, s in zip(frfs.recording.runs, frfs.frfsets)}
+    f = np.asarray(frfs.frfsets[0].frequency_hz, float)
+    band = tuple(band_hz) if band_hz else fit_band(fe, f)
+    if not band[0] < band[1]:
+        raise CorrelateError(f"{path}: the FRFs end at {f[-1]:g} Hz, below the FE modes (from "
+                             f"{np.min(fe.frequencies_hz):g} Hz): give --band LO,HI")
+    try:
+        gf = global_fit({n: s for n, (_, s) in runs.items()}, band, jackknife=False, selection_spread=False)
+    except _Error as exc:
+        raise CorrelateError(f"{path}: {exc}") from None
+    dofs, rows = [], []  # rows: (DOF index, reference index, sign) per fitted column
+    refs = list(gf.runs)
+    for run_name, channel in gf.columns:
+        run = runs[run_name][0]
+        ch = next(c for c in run.channels if c.name == channel)
+        dof = _dof(channel, ch.direction)
+        if dof is None:
+            rows.append(None)
+            continue
+        if dof[:2] not in dofs:
+            dofs.append(dof[:2])
+        rows.append((dofs.index(dof[:2]), refs.index(run_name), dof[2]))
+    if not dofs:
+        raise CorrelateError(f"{path}: no response channel named acc_<point>_<axis>: no shapes")
+    shapes = {p: np.full((len(gf.modes), 3), np.nan) for p, _ in dofs}
+    for k, mode in enumerate(gf.modes):
+        R = np.full((len(dofs), len(refs)), np.nan, complex)
+        for row, value in zip(rows, np.asarray(mode.residues)):
+            if row is not None:
+                R[row[0], row[1]] = row[2] * value
+        strength = [np.sum(np.abs(np.nan_to_num(R[:, j])) ** 2) for j in range(len(refs))]
+        psi = _rank_one(R, int(np.argmax(strength)))
+        seen = np.isfinite(psi)
+        values = np.full(len(dofs), np.nan)
+        values[seen] = real_shape(psi[seen])
+        for (point, axis), v in zip(dofs, values):
+            shapes[point][k, axis] = v
+    freqs = np.array([m.frequency_hz for m in gf.modes])
+    return FEModes(freqs, shapes, str(path))
+
+
+def _has_uff55(path) -> bool:
+    """A UFF file with datasets 55 (mode shapes): they are the test modes, its FRFs are not refitted."""
+    if Path(path).suffix.lower() not in (".uff", ".unv"):
+        return False
+    from guidefit.errors import RecordingError
+    from guidefit.io.uff import open_uff
+
+    try:
+        return 55 in open_uff(str(path))[1]
+    except RecordingError:
+        return False
+
+
+def read_test(path, fe: FEModes | None = None, band_hz: tuple | None = None) -> FEModes:
+    """The test side of ``correlate``, by suffix; FRFs (UFF-58, frf.h5) are fitted in the FE modes' band."""
+    from guidefit.io.frf_files import holds_frfs
+
     suffix = Path(path).suffix.lower()
     if suffix in (".json", ".jsonl"):
         return read_test_json(path)
+    if suffix in (".uff", ".unv", ".h5", ".hdf5") and holds_frfs(path) and not _has_uff55(path):
+        if fe is None:
+            raise CorrelateError(f"{path}: holds FRFs, fitted in the FE modes' band, which is not known here: give "
+                                 "the measured modes (UFF-55, guidefit JSON or CSV)")
+        return read_test_frfs(path, fe, band_hz)
     if suffix in (".uff", ".unv"):
         return read_test_uff(path)
     if suffix == ".csv":
         return read_modes_csv(path, "test")
-    raise CorrelateError(f"{path}: test modes are read from .uff/.unv (UFF-55), .json/.jsonl (guidefit "
-                         f"results) or .csv; not '{suffix or 'no suffix'}'")
+    raise CorrelateError(f"{path}: test modes are read from .uff/.unv (UFF-55 shapes or UFF-58 FRFs), guidefit's "
+                         f"frf.h5, .json/.jsonl (guidefit results) or .csv; not '{suffix or 'no suffix'}'")
 
 
 def read_point_map(path) -> dict[str, str]:
@@ -168,18 +296,27 @@ def _stack(modes: FEModes, points) -> np.ndarray:
 
 
 def mac_matrix(fe: FEModes, test: FEModes, point_map: dict | None = None) -> tuple[np.ndarray | None, tuple]:
-    """MAC of every FE mode with every test mode over the DOFs both have; (None, ()) without common points."""
+    """MAC of every FE mode with every test mode over the DOFs both have; (None, ()) without common points.
+
+    A DOF counts where every FE mode has it and the test measured it (not
+    all zero); each test mode uses those of them it has (finite), at least 2.
+    """
     point_map = point_map or {}
     pairs = [(tp, point_map.get(tp, tp)) for tp in test.shapes if point_map.get(tp, tp) in fe.shapes]
     if not pairs:
         return None, ()
     a = _stack(fe, [f for _, f in pairs])
     b = _stack(test, [t for t, _ in pairs])
-    use = np.all(np.isfinite(a), axis=0) & np.all(np.isfinite(b), axis=0)
-    use &= np.any(b != 0, axis=0)  # a direction the test never measured is no common DOF
-    if use.sum() < 2:
+    common = np.all(np.isfinite(a), axis=0) & np.any(np.nan_to_num(b) != 0, axis=0)  # never measured: not common
+    use = common & np.isfinite(b)  # per test mode: the DOFs it has (FRFs of other references: NaN)
+    if np.any(use.sum(axis=1) < 2):
         return None, ()
-    out = np.array([[mac(a[i, use], b[j, use]) for j in range(len(test))] for i in range(len(fe))])
+    out = np.empty((len(fe), len(test)))
+    for j in range(len(test)):
+        aj, bj = a[:, use[j]], b[j, use[j]]
+        num = np.abs(aj.conj() @ bj) ** 2
+        den = np.real(np.sum(aj.conj() * aj, axis=1)) * np.real(np.vdot(bj, bj))
+        out[:, j] = np.divide(num, den, out=np.zeros_like(num), where=den > 0)
     return out, tuple(t for t, _ in pairs)
 
 
@@ -192,9 +329,17 @@ def correlate(fe: FEModes, test: FEModes, point_map: dict | None = None) -> Corr
 
         if len(fe) < len(test):
             raise CorrelateError(f"{len(test)} test modes but only {len(fe)} FE modes: compute more FE modes")
-        rows_i, cols_j = linear_sum_assignment(-matrix)
+        # MAC first; among FE modes the measured DOFs cannot tell apart (MAC within ~0.01), the nearest frequency
+        gap = np.abs(np.log(fe.frequencies_hz[:, None] / test.frequencies_hz[None, :]))
+        rows_i, cols_j = linear_sum_assignment(-matrix + FREQUENCY_TIE_BREAK * gap)
         pairing = dict(zip(cols_j, rows_i))
         paired_by = "mac"
+        for j, i in sorted(pairing.items()):
+            alike = [int(k) + 1 for k in np.flatnonzero(matrix[:, j] >= matrix[i, j] - MAC_ALIKE) if k != i]
+            if alike:
+                notes.append(f"test mode {j + 1}: its shape at the common DOFs is alike FE mode(s) "
+                             f"{', '.join(map(str, alike))} and {i + 1} (MAC within {MAC_ALIKE:g}): paired with "
+                             f"FE mode {i + 1} by frequency; measure more DOFs to tell them apart")
     else:
         if fe.shapes and test.shapes:
             notes.append("no common points with shapes on both sides (give --point-map): modes paired by order")
@@ -233,6 +378,19 @@ def parse_checks(text: str | None) -> dict:
                                  "(e.g. max_error_pct=5,min_mac=0.8)")
         out[key] = number
     return out
+
+
+def parse_band(text: str | None) -> tuple[float, float] | None:
+    """``LO,HI`` in Hz (0 <= LO < HI) -> tuple; None when not given; bad text is a CorrelateError."""
+    if not text:
+        return None
+    try:
+        lo, hi = (float(v) for v in text.split(","))
+    except ValueError:
+        lo = hi = math.nan
+    if not (math.isfinite(lo) and math.isfinite(hi) and 0 <= lo < hi):
+        raise CorrelateError(f"--band '{text[:40]}': use LO,HI in Hz with 0 <= LO < HI (e.g. 500,8000)")
+    return lo, hi
 
 
 def failed_checks(result: Correlation, checks: dict) -> list[str]:
@@ -287,13 +445,16 @@ def plot_mac(result: Correlation, path) -> None:
     plt.close(fig)
 
 
-def run(fe_path, test_path, point_map_path=None) -> Correlation:
-    """Read both sides and correlate them; unreadable input is a one-line error (exit 2)."""
+def run(fe_path, test_path, point_map_path=None, band_hz=None) -> Correlation:
+    """Read both sides and correlate them; unreadable input is a one-line error (exit 2).
+
+    ``band_hz`` (LO, HI): where measured FRFs are fitted (default :func:`fit_band`).
+    """
     try:
         fe = read_fe(fe_path)
     except FEResultError as exc:
         raise CorrelateError(str(exc)) from None
-    test = read_test(test_path)
+    test = read_test(test_path, fe, band_hz)
     result = correlate(fe, test, read_point_map(point_map_path) if point_map_path else None)
     for note in result.warnings:
         warnings.warn(note, stacklevel=2)

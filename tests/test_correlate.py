@@ -4,6 +4,7 @@ import json
 import shutil
 import subprocess
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,7 +12,7 @@ from click.testing import CliRunner
 
 from guidefit.cli import main
 from guidefit.correlate import correlate, eq34_error_pct, mac
-from guidefit.io.fe_results import FEModes, read_f06
+from guidefit.io.fe_results import FEModes, read_f06, read_fe
 from guidefit.model import vibration as vib
 from guidefit.model.guides import load_guide
 
@@ -204,3 +205,173 @@ def test_ccx_dat_against_the_model_it_came_from(tmp_path):
     out = _invoke(tmp_path / "deck.dat", test, "--json", "--check", "max_error_pct=0.01,min_mac=0.9999")
     assert out.exit_code == 0, out.output
     assert json.loads(out.output)["paired_by"] == "mac"
+
+
+_FRD = """    1C
+    2C                             2                                     1
+ -1       101 0.00000E+00 5.00000E-02 0.00000E+00
+ -1        25 1.00000E-01 5.00000E-02 0.00000E+00
+ -3
+    1PSTEP                         1           1           1
+  100CL  101 124.0903727           2                     2    1MODAL      1
+ -4  DISP        4    1
+ -5  D1          1    2    1    0
+ -5  D2          1    2    2    0
+ -5  D3          1    2    3    0
+ -5  ALL         1    2    0    0    1ALL
+ -1       101 2.15125E-03-4.41551E-05-6.19797E-02
+ -1        25 1.85608E-06-3.54146E-08 3.53801E-05
+ -3
+    1PSTEP                         2           1           1
+  100CL  102 1032.531148           2                     2    2MODAL      1
+ -4  DISP        4    1
+ -5  D1          1    2    1    0
+ -5  D2          1    2    2    0
+ -5  D3          1    2    3    0
+ -5  ALL         1    2    0    0    1ALL
+ -1       101-1.05617E-04-1.22313E-04-6.18317E-02
+ -1        25 3.70844E-06-7.03724E-08 4.75377E-06
+ -3
+    1PSTEP                         3           0           2
+  100CL  106 11.12725674           2                     1    6           1
+ -4  DISP        4    1
+ -5  D1          1    2    1    0
+ -5  D2          1    2    2    0
+ -5  D3          1    2    3    0
+ -5  ALL         1    2    0    0    1ALL
+ -1       101 1.00000E+00 1.00000E+00 1.00000E+00
+ -1        25 1.00000E+00 1.00000E+00 1.00000E+00
+ -3
+ 9999
+"""
+
+
+def test_ccx_frd_fixed_columns_and_only_the_frequency_step(tmp_path):
+    """Touching numbers are split by column; the later (steady-state, ictype 1) step's blocks are no modes."""
+    frd = tmp_path / "job.frd"
+    frd.write_text(_FRD)
+    modes = read_fe(frd)
+    assert np.allclose(modes.frequencies_hz, [124.0903727, 1032.531148], rtol=1e-12)
+    assert sorted(modes.shapes) == ["101", "25"]
+    assert np.allclose(modes.shapes["101"][0], [2.15125e-3, -4.41551e-5, -6.19797e-2], rtol=1e-12)
+    assert np.allclose(modes.shapes["25"][1], [3.70844e-6, -7.03724e-8, 4.75377e-6], rtol=1e-12)
+
+
+def test_ccx_frd_without_mode_shapes_is_one_line_exit_2(tmp_path):
+    frd = tmp_path / "static.frd"
+    frd.write_text(_FRD.split("    1PSTEP")[0] + " 9999\n")
+    test = tmp_path / "test.csv"
+    test.write_text("frequency_hz\n1000\n")
+    out = _invoke(frd, test)
+    assert out.exit_code == 2 and "*NODE FILE" in out.output
+    assert len(out.output.strip().splitlines()) == 1
+
+
+@pytest.mark.skipif(shutil.which("ccx") is None, reason="CalculiX ccx not installed (apt-get install calculix-ccx)")
+def test_ccx_frd_equals_the_dat_of_the_same_run(tmp_path):
+    """The machine example with *NODE FILE: the .frd's modes are the .dat's (frequencies, MAC 1 pairwise)."""
+    example = Path(__file__).resolve().parent.parent / "examples" / "machine"
+    shutil.copy(example / "joints.inp", tmp_path / "joints.inp")
+    deck = (example / "machine.inp").read_text()
+    assert "*NODE PRINT,NSET=MEASURED" in deck
+    deck = deck.replace("*NODE PRINT,NSET=MEASURED", "*NODE FILE,OUTPUT=2D,NSET=MEASURED\nU\n*NODE PRINT,NSET=MEASURED")
+    (tmp_path / "machine.inp").write_text(deck)
+    subprocess.run([shutil.which("ccx"), "-i", "machine"], cwd=tmp_path, capture_output=True, check=False,
+                   timeout=120)
+    frd, dat = read_fe(tmp_path / "machine.frd"), read_fe(tmp_path / "machine.dat")
+    assert len(frd) == len(dat) == 12
+    assert np.allclose(frd.frequencies_hz, dat.frequencies_hz, rtol=1e-6)  # the .dat prints 7 digits
+    assert sorted(frd.shapes) == sorted(dat.shapes) and len(frd.shapes) == 16
+    result = correlate(frd, dat)  # the .dat as the "test" side: the same modes at the same nodes
+    assert result.paired_by == "mac"
+    assert [r["fe_mode"] for r in result.rows] == list(range(1, 13))
+    assert max(abs(r["error_pct"]) for r in result.rows) < 1e-4
+    assert min(r["mac"] for r in result.rows) > 0.99999
+
+
+@pytest.fixture(scope="module")
+def frf_uff(tmp_path_factory):
+    """FRFs (UFF-58) of a simulated MRB35 recording, two references (vertical and lateral hits)."""
+    where = tmp_path_factory.mktemp("frf")
+    rec, uff = where / "r.h5", where / "r.uff"
+    out = CliRunner().invoke(main, ["simulate", "--guide", "MRB35", "--out", str(rec), "--hits", "4"])
+    assert out.exit_code == 0, out.output
+    out = CliRunner().invoke(main, ["frf", str(rec), "--out", str(uff)])
+    assert out.exit_code == 0, out.output
+    return uff
+
+
+def test_uff58_frfs_fitted_by_the_global_estimator_pair_by_mac(tmp_path, frf_uff):
+    """The model's modes (shuffled, under other point names) against FRFs simulated from it: MAC pairs, ~0 %."""
+    freqs, shapes, labels = _model_modes()
+    order = [2, 4, 0, 3, 1]
+    names = {p: f"n{k}" for k, p in enumerate(shapes)}
+    fe = _csv(tmp_path / "fe.csv", freqs[order], {p: s[order] for p, s in shapes.items()}, names,
+              [labels[k] for k in order])
+    pmap = tmp_path / "map.txt"
+    pmap.write_text("".join(f"{p} = {n}\n" for p, n in names.items()))
+    out = _invoke(fe, frf_uff, "--point-map", pmap, "--json", "--check", "max_error_pct=0.05,min_mac=0.99")
+    assert out.exit_code == 0, out.output
+    doc = json.loads(out.stdout)
+    assert doc["paired_by"] == "mac" and set(doc["common_points"]) == set("ABCD")
+    assert len(doc["modes"]) == 5
+    for row, k in zip(doc["modes"], range(5)):  # test modes in frequency order: model mode k is FE row order.index(k)
+        assert row["fe_mode"] == order.index(k) + 1
+        assert row["test_hz"] == pytest.approx(freqs[k], rel=1e-4)
+        assert abs(row["error_pct"]) < 0.05 and row["mac"] > 0.99
+    # one axis per reference (y in the vertical run, x in the lateral one): the rolls and the lateral motion look
+    # alike at four x DOFs; the pairing says so and falls back on frequency among them
+    assert any("alike" in w for w in doc["warnings"])
+
+
+def test_uff58_frfs_against_frequencies_only_pair_by_order(tmp_path, frf_uff):
+    """A CSV of the model frequencies alone: pairing by order, with the warning; a wrong model shows its error."""
+    freqs, _, _ = _model_modes()
+    fe = tmp_path / "fe.csv"
+    fe.write_text("frequency_hz\n" + "".join(f"{1.05 * float(f)!r}\n" for f in freqs))
+    out = _invoke(fe, frf_uff, "--json")
+    assert out.exit_code == 0, out.output
+    doc = json.loads(out.stdout)
+    assert doc["paired_by"] == "order" and "no shapes on the FE side" in doc["warnings"][0]
+    assert [r["fe_mode"] for r in doc["modes"]] == [1, 2, 3, 4, 5]
+    assert all(r["error_pct"] == pytest.approx(5.0, abs=0.05) for r in doc["modes"])
+    out = _invoke(fe, frf_uff, "--band", "8000,100")
+    assert out.exit_code == 2 and "--band" in out.output and len(out.output.strip().splitlines()) == 1
+
+
+def test_uff58_frfs_that_end_below_the_fe_modes_are_one_line_exit_2(tmp_path, frf_uff):
+    fe = tmp_path / "fe.csv"
+    fe.write_text("frequency_hz\n200000\n300000\n")
+    out = _invoke(fe, frf_uff)
+    assert out.exit_code == 2 and "--band" in out.output and len(out.output.strip().splitlines()) == 1
+
+
+@pytest.fixture(scope="module")
+def frf_both(tmp_path_factory):
+    """FRFs of a recording with x and y at A-D in both runs (UFF-58 and guidefit's frf.h5): references linked."""
+    where = tmp_path_factory.mktemp("frfboth")
+    rec = where / "r.h5"
+    out = CliRunner().invoke(main, ["simulate", "--guide", "MRB35", "--out", str(rec), "--hits", "4",
+                                    "--sensors", "both"])
+    assert out.exit_code == 0, out.output
+    for name in ("r.uff", "frf.h5"):
+        out = CliRunner().invoke(main, ["frf", str(rec), "--out", str(where / name)])
+        assert out.exit_code == 0, out.output
+    return where / "r.uff", where / "frf.h5"
+
+
+@pytest.mark.parametrize("which", [0, 1])
+def test_frfs_of_references_sharing_sensors_give_whole_shapes(tmp_path, frf_both, which):
+    """Two references measured at the same 8 DOFs: one rank-one shape per mode, MAC 1 to its own model mode only."""
+    freqs, shapes, _ = _model_modes()
+    order = [4, 3, 2, 1, 0]
+    fe = _csv(tmp_path / "fe.csv", freqs[order], {p: s[order] for p, s in shapes.items()})
+    out = _invoke(fe, frf_both[which], "--json", "--check", "max_error_pct=0.01,min_mac=0.999")
+    assert out.exit_code == 0, out.output
+    doc = json.loads(out.stdout)
+    assert doc["paired_by"] == "mac" and doc["warnings"] == []
+    assert [r["fe_mode"] for r in doc["modes"]] == [order.index(k) + 1 for k in range(5)]
+    mac_matrix = np.array(doc["mac_matrix"])  # FE x test: off the pairs below 0.02
+    paired = np.zeros_like(mac_matrix, dtype=bool)
+    paired[[r["fe_mode"] - 1 for r in doc["modes"]], [r["test_mode"] - 1 for r in doc["modes"]]] = True
+    assert mac_matrix[~paired].max() < 0.02

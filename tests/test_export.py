@@ -329,3 +329,151 @@ def test_missing_parameter_and_bad_json_are_bad_input(tmp_path):
     code, out = _run(nope)
     assert code == 2 and "line 1: not JSON" in out
     assert read_results(_write(tmp_path, "l.json", [[RESULT]]))[0]["file"] == "carriage1.h5"
+
+
+# --------------------------------------------------------------------------- Nastran against CalculiX
+
+
+def _ccx_cards(text):
+    """(keyword line, data lines) of each card of a CalculiX deck, comments dropped (blank data lines kept)."""
+    cards = []
+    for line in text.splitlines():
+        if line.startswith("**"):
+            continue
+        if line.startswith("*"):
+            cards.append((line.upper(), []))
+        elif cards:
+            cards[-1][1].append(line)
+    return cards
+
+
+def _ccx_global(text, rot_offset=50):
+    """K and C of a guidefit CalculiX include as {((node, comp), (node, comp)): value}, Nastran DOF numbering.
+
+    Springs (SPRING1 on an auxiliary DOF, SPRING2 between node DOFs) and dashpots (DASHPOTA from an auxiliary
+    node to a fixed ground node, along x) are assembled as k v v^T; an auxiliary DOF is replaced by its
+    *EQUATION's combination of node DOFs; DOF d of a rotation node n + rot_offset is component 3 + d of n
+    (the default node ids: carriage 10001, rail 20001, plus fewer than ``rot_offset`` springs).
+    """
+    cards = _ccx_cards(text)
+    coords, elements, equations, terms = {}, {}, {}, []
+    for key, data in cards:
+        if key.startswith("*NODE"):
+            for row in data:
+                n, *xyz = row.split(",")
+                coords[int(n)] = np.array([float(v) for v in xyz])
+        elif key.startswith("*ELEMENT"):
+            kind = key.split("TYPE=")[1].split(",")[0]
+            for row in data:
+                _, *nodes = (int(v) for v in row.split(","))
+                elements[key.split("ELSET=")[1]] = (kind, nodes)
+        elif key.startswith("*EQUATION"):
+            cells = [c for row in data[1:] for c in row.split(",") if c.strip()]
+            t = [(int(cells[a]), int(cells[a + 1]), float(cells[a + 2])) for a in range(0, len(cells), 3)]
+            equations[t[0][:2]] = {(n, d): -c / t[0][2] for n, d, c in t[1:]}
+    for key, data in cards:
+        if key.startswith("*SPRING") or key.startswith("*DASHPOT"):
+            kind, nodes = elements[key.split("ELSET=")[1]]
+            dofs, value = data[0], float(data[1])
+            if kind == "SPRING1":
+                v = {(nodes[0], int(dofs)): 1.0}
+            elif kind == "SPRING2":
+                d1, d2 = (int(x) for x in dofs.split(","))
+                v = {(nodes[0], d1): 1.0, (nodes[1], d2): -1.0}
+            else:  # DASHPOTA from an auxiliary node to the ground node, along x
+                assert kind == "DASHPOTA" and not dofs.strip()
+                assert np.allclose(coords[nodes[1]] - coords[nodes[0]], [1, 0, 0])
+                v = {(nodes[0], 1): 1.0}
+            terms.append(("K" if key.startswith("*SPRING") else "C", value, v))
+    out = {"K": {}, "C": {}}
+    for which, value, v in terms:
+        full = {}
+        for dof, c in v.items():
+            for (n, d), a in equations.get(dof, {dof: 1.0}).items():
+                key = (n - rot_offset, 3 + d) if n % 10000 >= rot_offset else (n, d)  # default ids: 10001, 20001
+                full[key] = full.get(key, 0.0) + c * a
+        for a, ca in full.items():
+            for b, cb in full.items():
+                out[which][a, b] = out[which].get((a, b), 0.0) + value * ca * cb
+    return out
+
+
+def _nastran_global(model):
+    """K and C of a guidefit Nastran deck read by pyNastran: DMIG K2GG/B2GG or PBUSH/CBUSH, same layout."""
+    out = {"K": {}, "C": {}}
+    for which, name in (("K", "GFJK"), ("C", "GFJB")):
+        if name in model.dmig:
+            d = model.dmig[name]
+            for gj, gi, value in zip(d.GCj, d.GCi, d.Real):
+                a, b = tuple(int(x) for x in gi), tuple(int(x) for x in gj)
+                out[which][a, b] = out[which][b, a] = float(value)
+    for elem in model.elements.values():
+        prop = model.properties[elem.pid]
+        ga, gb = elem.nodes
+        for which, values in (("K", prop.Ki), ("C", prop.Bi)):
+            for comp, value in enumerate(values, start=1):
+                if value:
+                    for (n, m), s in (((ga, ga), 1), ((gb, gb), 1), ((ga, gb), -1), ((gb, ga), -1)):
+                        key = ((n, comp), (m, comp))
+                        out[which][key] = out[which].get(key, 0.0) + s * float(value)
+    return out
+
+
+def _same_matrices(a, b):
+    """Largest difference of two {(dof, dof): value} matrices relative to sqrt(|A_ii A_jj|) of the entry."""
+    worst = 0.0
+    for which in ("K", "C"):
+        x, y = a[which], b[which]
+        diag = {k[0]: abs(v) for k, v in y.items() if k[0] == k[1]}
+        for key in set(x) | set(y):
+            scale = math.sqrt(diag.get(key[0], 0.0) * diag.get(key[1], 0.0)) or max(abs(v) for v in y.values())
+            worst = max(worst, abs(x.get(key, 0.0) - y.get(key, 0.0)) / scale)
+    return worst
+
+
+@pytest.mark.parametrize("element", ["matrix", "bush", "springs"])
+@pytest.mark.parametrize("joint,units,axis_map", [("explained", "si", None), ("apparent", "si", None),
+                                                   ("explained", "mm-N-s", "x=X,y=Z,z=-Y")])
+def test_calculix_include_encodes_the_joints_matrices(tmp_path, element, joint, units, axis_map):
+    """The CalculiX include, springs and equations assembled back, is the exported element's K and C (1e-9)."""
+    results = _write(tmp_path, "r.jsonl", [RESULT])
+    expl = _write(tmp_path, "e.json", [ADEQUATE])
+    args = ["--joint", joint, "--explain", expl, "--element", element, "--units", units] + \
+        (["--axis-map", axis_map] if axis_map else [])
+    code, text = _run(results, *args, "--format", "calculix")
+    assert code == 0, text
+    got = _ccx_global(text)
+    j = (explained_joint(RESULT, ADEQUATE) if joint == "explained" else apparent_joint(RESULT))
+    want = {"K": {}, "C": {}}
+    for e in build_elements([j], element, units=units, axis_map=parse_axis_map(axis_map), ids_per_element=13
+                            if element != "springs" else 2):
+        for which, m in (("K", e.stiffness), ("C", e.damping)):
+            m = np.diag(np.diag(m)) if element == "bush" else m  # a bush is the diagonal (couplings noted)
+            for a in range(6):
+                for b in range(6):
+                    if m[a, b]:
+                        for (n1, n2), s in (((e.carriage_node, e.carriage_node), 1), ((e.rail_node, e.rail_node), 1),
+                                            ((e.carriage_node, e.rail_node), -1), ((e.rail_node, e.carriage_node), -1)):
+                            key = ((n1, a + 1), (n2, b + 1))
+                            want[which][key] = want[which].get(key, 0.0) + s * float(m[a, b])
+    assert _same_matrices(got, want) < 1e-9
+
+
+@pytest.mark.parametrize("element", ["matrix", "bush", "springs"])
+@pytest.mark.parametrize("joint,units,axis_map", [("explained", "si", None), ("apparent", "si", None),
+                                                   ("explained", "mm-N-s", "x=X,y=Z,z=-Y")])
+def test_nastran_deck_read_by_pynastran_equals_the_calculix_include(tmp_path, element, joint, units, axis_map):
+    """pyNastran's K and C of the Nastran deck (DMIG or PBUSH/CBUSH) equal the CalculiX include's, 1e-9."""
+    _pynastran()
+    results = _write(tmp_path, "r.jsonl", [RESULT])
+    expl = _write(tmp_path, "e.json", [ADEQUATE])
+    args = ["--joint", joint, "--explain", expl, "--element", element, "--units", units] + \
+        (["--axis-map", axis_map] if axis_map else [])
+    code, nastran = _run(results, *args, "--format", "nastran")
+    assert code == 0, nastran
+    code, calculix = _run(results, *args, "--format", "calculix")
+    assert code == 0, calculix
+    from_nastran, from_ccx = _nastran_global(_bdf(nastran, tmp_path)), _ccx_global(calculix)
+    assert from_nastran["K"] and from_nastran["C"]
+    assert _same_matrices(from_nastran, from_ccx) < 1e-9
+    assert _same_matrices(from_ccx, from_nastran) < 1e-9

@@ -121,6 +121,68 @@ def read_ccx_dat(path) -> FEModes:
     return FEModes(freqs, shapes, str(path))
 
 
+def _frd_blocks(lines: list[str], where: str) -> list[tuple[int, float, dict]]:
+    """(step, frequency Hz, {node: (3,) D1-D3}) of each ``DISP`` block of a ``*FREQUENCY`` step (ictype 2)."""
+    out, step, k = [], 0, 0
+    while k < len(lines):
+        line = lines[k]
+        if line.startswith("    1PSTEP"):
+            fields = line[10:].split()
+            step = int(fields[2]) if len(fields) >= 3 and fields[2].isdigit() else step
+        elif line.startswith("  100C") and k + 1 < len(lines):
+            head = lines[k + 1].split()
+            try:
+                value, ictype, fmt = float(line[12:24]), int(line[56:58]), int(line[73:75] or 0)
+            except ValueError:
+                raise FEResultError(f"{where}:{k + 1}: not a CalculiX .frd result header: '{line.strip()[:60]}'") \
+                    from None
+            if ictype == 2 and head[:2] == ["-4", "DISP"]:
+                if fmt not in (0, 1):
+                    raise FEResultError(f"{where}: a binary .frd (format {fmt}); write it in ASCII (the default)")
+                width = 5 if fmt == 0 else 10
+                values, k = {}, k + 2
+                while k < len(lines) and not lines[k].startswith(" -3"):
+                    row = lines[k]
+                    if row.startswith(" -1"):
+                        try:
+                            node = int(row[3:3 + width])
+                            values[node] = np.array([float(row[3 + width + 12 * i:3 + width + 12 * (i + 1)])
+                                                     for i in range(3)])
+                        except ValueError:
+                            raise FEResultError(f"{where}:{k + 1}: not a DISP record: '{row.strip()[:60]}'") \
+                                from None
+                    k += 1
+                out.append((step, value, values))
+        k += 1
+    return out
+
+
+def read_ccx_frd(path) -> FEModes:
+    """A ccx ``.frd`` (ASCII): frequencies and shapes from the ``DISP`` blocks of the first ``*FREQUENCY`` step.
+
+    Each mode's block starts with a ``1PSTEP`` record (its third field is the
+    step) and a ``100CL`` header whose value is the frequency (cycles/time)
+    and whose ``ictype`` 2 marks a frequency step; its ``-1`` records hold
+    the node id and D1, D2, D3 in fixed columns (``I5`` or ``I10``, then
+    ``E12.5``: neighbouring numbers may touch, so no whitespace split).
+    Beam and shell models need ``*NODE FILE,OUTPUT=2D`` for the results to be
+    at the model's own nodes rather than at ccx's expanded ones.
+    """
+    where = str(path)
+    blocks = _frd_blocks(_text(path).splitlines(), where)
+    if not blocks:
+        raise FEResultError(f"{where}: no mode shapes (no DISP block of a *FREQUENCY step: add *NODE FILE with U "
+                            "to the step, or give the .dat)")
+    first = blocks[0][0]
+    blocks = [b for b in blocks if b[0] == first]
+    freqs = np.array([f for _, f, _ in blocks])
+    if not np.all(np.isfinite(freqs)):
+        raise FEResultError(f"{where}: a mode's frequency is not a number")
+    nodes = sorted(set.intersection(*(set(b) for _, _, b in blocks)))
+    shapes = {str(n): np.vstack([b[n] for _, _, b in blocks]) for n in nodes}
+    return FEModes(freqs, shapes, where)
+
+
 _F06 = "R E A L   E I G E N V A L U E S"
 
 
@@ -194,10 +256,11 @@ def read_modes_csv(path, what: str = "FE") -> FEModes:
 
 
 def read_fe(path) -> FEModes:
-    """The FE side of ``correlate``, by suffix: ``.dat`` (ccx), ``.f06``/``.op2`` (Nastran), ``.csv``."""
+    """The FE side of ``correlate``, by suffix: ``.dat``/``.frd`` (ccx), ``.f06``/``.op2`` (Nastran), ``.csv``."""
     suffix = Path(path).suffix.lower()
-    readers = {".dat": read_ccx_dat, ".f06": read_f06, ".op2": read_op2, ".csv": read_modes_csv}
+    readers = {".dat": read_ccx_dat, ".frd": read_ccx_frd, ".f06": read_f06, ".op2": read_op2,
+               ".csv": read_modes_csv}
     if suffix not in readers:
-        raise FEResultError(f"{path}: FE results are read from .dat (CalculiX), .f06 or .op2 (Nastran) or "
+        raise FEResultError(f"{path}: FE results are read from .dat or .frd (CalculiX), .f06 or .op2 (Nastran) or "
                             f".csv; not '{suffix or 'no suffix'}'")
     return readers[suffix](path)
