@@ -303,7 +303,13 @@ def lscf_stabilisation(frequency_hz, H, orders: Sequence[int] = range(4, 49, 2),
     rows = []
     prev = None
     for n in orders:
-        p = _lscf_poles(R, S, T, n, m, ts)
+        try:
+            p = _lscf_poles(R, S, T, n, m, ts)
+        except np.linalg.LinAlgError:  # a narrow band: the basis of this and every higher order is singular
+            if not rows:
+                raise IdentificationError(f"LSCF: the band {lo:.0f}-{hi:.0f} Hz holds too little for model order "
+                                          f"{n} (its basis is numerically singular); widen the band") from None
+            break  # the diagram ends at the last order the band supports
         wn = np.abs(p)
         zeta = -p.real / np.where(wn > 0, wn, 1.0)
         fn = wn / (2 * np.pi)

@@ -276,3 +276,31 @@ def test_modal_stage_runs_with_one_blas_thread_and_restores_the_setting():
     after = [p["num_threads"] for p in threadpoolctl.threadpool_info() if p["user_api"] == "blas"]
     assert inside == [1] * len(before)
     assert after == before
+
+
+def test_a_band_too_narrow_for_the_high_orders_ends_the_diagram_not_the_run(monkeypatch):
+    """An order whose LSCF basis is numerically singular (a narrow band at a high order) ended identify
+    with a bare LinAlgError; the diagram now stops at the last order the band supports, and a band too
+    narrow for the first order is one IdentificationError."""
+    from guidefit.errors import IdentificationError
+
+    f = np.linspace(0.0, 10_000.0, 20_001)
+    s = 2j * np.pi * f
+    pole = 2 * np.pi * 5000.0 * (-0.02 + 1j)
+    H = (1 / (s - pole) + 1 / (s - np.conj(pole)))[:, None] * np.array([1.0, 0.5])[None, :]
+    real = globalfit._lscf_poles
+
+    def singular_from(order):
+        def poles(R, S, T, n, m, ts):
+            if n >= order:
+                raise np.linalg.LinAlgError(f"LSCF: the order-{n} basis Gram matrix is not positive definite")
+            return real(R, S, T, n, m, ts)
+        return poles
+
+    monkeypatch.setattr(globalfit, "_lscf_poles", singular_from(20))
+    diagram = globalfit.lscf_stabilisation(f, H, band_hz=(4000.0, 6000.0))
+    assert diagram.orders.size and diagram.orders.max() < 20  # ended below the singular orders
+    assert np.any(np.abs(diagram.frequency_hz - 5000.0) < 5.0)  # and still holds the mode
+    monkeypatch.setattr(globalfit, "_lscf_poles", singular_from(0))
+    with pytest.raises(IdentificationError, match="widen the band"):
+        globalfit.lscf_stabilisation(f, H, band_hz=(4000.0, 6000.0))
