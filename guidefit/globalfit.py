@@ -152,23 +152,29 @@ def one_blas_thread():
     return controller.limit(limits=1, user_api="blas")
 
 
-_CONTROLLER: list = []
+_CONTROLLER: dict = {}  # the loaded BLAS libraries (as far as the modules that load them tell) -> controller
 
 
 def _blas_controller():
-    """The process's threadpoolctl controller (None without threadpoolctl), made on first use.
+    """The threadpoolctl controller of the BLAS libraries loaded now (None without threadpoolctl).
 
     The fit's linear algebra is numpy's (numpy.linalg and matrix products), so
-    numpy's BLAS is the one to limit; scipy.linalg is not imported for it.
+    numpy's BLAS is the one that matters; scipy.linalg is not imported for it.
+    A controller knows the libraries loaded when it was made, so another is
+    made (once) after scipy.linalg has loaded scipy's own BLAS (a second
+    OpenBLAS in the wheels): every BLAS is limited, whatever the import order.
     """
-    if not _CONTROLLER:
+    import sys
+
+    key = "scipy.linalg" in sys.modules
+    if key not in _CONTROLLER:
         try:
             from threadpoolctl import ThreadpoolController
         except ImportError:  # pragma: no cover - threadpoolctl is a dependency
-            _CONTROLLER.append(None)
+            _CONTROLLER[key] = None
         else:
-            _CONTROLLER.append(ThreadpoolController())
-    return _CONTROLLER[0]
+            _CONTROLLER[key] = ThreadpoolController()
+    return _CONTROLLER[key]
 
 
 def _mac(a: np.ndarray, b: np.ndarray) -> float:
