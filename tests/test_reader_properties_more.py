@@ -337,3 +337,118 @@ def test_hdf5_recording_metadata_as_the_file_states_or_refused(e, seed):
     assert np.dtype(e["dtype"]).kind == "f" or e["scale"] is not None, "integer counts read without a scale"
     expected = np.asarray(stored if e["hits"] is None else stored[0], np.float64) * scale
     np.testing.assert_allclose(block, expected, rtol=1e-12, atol=0)
+
+
+# ------------------------------------------------------------------ DAQ files through a setup
+
+CONVERSIONS = {None: "", "mv": "sensitivity_mv = 2.0", "scale": "scale = 0.5"}
+
+
+def _daq_setup(folder: Path, file: str, hammer: str, acc: str, conv: tuple, rate: float | None) -> Path:
+    """A setup TOML reading ``hammer`` as force (N) and ``acc`` as acc_A_y (g)."""
+    lines = ['format = "guidefit-setup"', "format_version = 1",
+             "[channels.force]", f'source = "{hammer}"', 'unit = "N"', CONVERSIONS[conv[0]],
+             "[channels.acc_A_y]", f'source = "{acc}"', 'unit = "g"', CONVERSIONS[conv[1]],
+             "[runs.vertical]", f'file = "{file}"', "excitation_direction = [0.0, -1.0, 0.0]"]
+    if rate is not None:
+        lines.append(f"sample_rate_hz = {rate!r}")
+    (folder / "test.toml").write_text("\n".join(lines) + "\n")
+    return folder / "test.toml"
+
+
+def _unit_allowed(file_unit, conv, unit: str) -> bool:
+    """Whether a channel the file states in ``file_unit`` may be read as ``unit`` with conversion ``conv``."""
+    if file_unit is None or not str(file_unit).strip() or conv == "scale":
+        return True
+    text = str(file_unit).strip().lower()
+    if conv == "mv":
+        return text in ("v", "volt", "volts")
+    return text in ({"n", "newton", "newtons"} if unit == "N" else {"g", "gn", "g0"})
+
+
+TDMS_INCREMENTS = ("valid", "valid", "valid", "missing", "zero", "negative", "nan", "inf", "tiny", "subnormal", "huge",
+                   "text", "other")
+TDMS_OFFSETS = (None, None, 0.0, 0.0, 0.3, 0.7, 2.0, math.nan, math.inf, "text")
+
+
+TDMS_VALID = dict(n=8, n_acc=None, fs=51200.0, inc=("valid", "valid"), offset=(None, None), unit=("V", "V"),
+                  conv=("mv", "mv"), stated=None)
+
+
+@st.composite
+def tdms_files(draw):
+    """A valid file and setup with up to two of their fields drawn from hostile values."""
+    hostile = {
+        "n_acc": st.sampled_from([1, 3]),
+        "inc": st.tuples(st.sampled_from(TDMS_INCREMENTS), st.sampled_from(TDMS_INCREMENTS)),
+        "offset": st.tuples(st.sampled_from(TDMS_OFFSETS), st.sampled_from(TDMS_OFFSETS)),
+        "unit": st.tuples(*[st.sampled_from(["V", None, "mV", "N", "g", "m/s^2", "", "Pa", "volts", 5.0])] * 2),
+        "conv": st.tuples(st.sampled_from(["mv", None, "scale"]), st.sampled_from(["mv", None, "scale"])),
+        "stated": st.sampled_from(["same", "other", "close"]),
+    }
+    keys = draw(st.sets(st.sampled_from(sorted(hostile)), max_size=2))
+    e = dict(TDMS_VALID, n=draw(st.integers(2, 60)), fs=draw(st.sampled_from(RATES)))
+    e.update({key: draw(hostile[key]) for key in sorted(keys)})
+    return e
+
+
+def _increment(kind: str, fs: float):
+    return {"valid": 1 / fs, "zero": 0.0, "negative": -1 / fs, "nan": math.nan, "inf": math.inf, "tiny": 1e-300,
+            "subnormal": 5e-324, "huge": 1e300, "text": "abc", "other": 1 / (fs * 1.001)}.get(kind)
+
+
+@SETTINGS
+@given(e=tdms_files(), seed=st.integers(0, 2**16))
+@example(e=TDMS_VALID, seed=0)
+# wf_increment 5e-324 s: OverflowError (an internal error, exit 1) from the rate's whole-Hz rounding
+@example(e=dict(TDMS_VALID, inc=("subnormal", "valid")), seed=0)
+# wf_increment 0 (or NaN, text) on one channel: ignored, the other channel's (or the setup's) rate used
+@example(e=dict(TDMS_VALID, inc=("valid", "zero")), seed=0)
+@example(e=dict(TDMS_VALID, inc=("nan", "nan"), stated="same"), seed=0)
+# wf_start_offset NaN or text on one channel: the start times were never compared
+@example(e=dict(TDMS_VALID, offset=(0.0, math.nan)), seed=0)
+@example(e=dict(TDMS_VALID, offset=(0.0, "text")), seed=0)
+def test_tdms_metadata_as_the_file_states_or_refused(e, seed):
+    from nptdms import ChannelObject, TdmsWriter
+
+    rng = np.random.default_rng(seed)
+    fs = e["fs"]
+    stated = {None: None, "same": fs, "other": fs * 1.01, "close": fs * (1 + 1e-7)}[e["stated"]]
+    objects, props = [], []
+    for k, name in enumerate(("Hammer", "AccA_Y")):
+        p = {}
+        if e["inc"][k] != "missing":
+            p["wf_increment"] = _increment(e["inc"][k], fs)
+        if e["offset"][k] is not None:
+            p["wf_start_offset"] = e["offset"][k] / fs if isinstance(e["offset"][k], float) else e["offset"][k]
+        if e["unit"][k] is not None:
+            p["unit_string"] = e["unit"][k]
+        n = e["n_acc"] if (k == 1 and e["n_acc"] is not None) else e["n"]
+        objects.append(ChannelObject("run", name, rng.normal(size=n), properties=p))
+        props.append(p)
+    with tempfile.TemporaryDirectory() as folder:
+        folder = Path(folder)
+        with TdmsWriter(folder / "run.tdms") as writer:
+            writer.write_segment(objects)
+        run = _read(_daq_setup(folder, "run.tdms", "Hammer", "AccA_Y", e["conv"], stated))
+    if run is None:
+        return
+    lengths = {e["n"], e["n"] if e["n_acc"] is None else e["n_acc"]}
+    assert lengths == {run.n_samples}, "channels of different lengths read as one run"
+    assert run.n_samples >= 2
+    for k, unit in enumerate(("N", "g")):
+        assert _unit_allowed(props[k].get("unit_string"), e["conv"][k], unit), (props[k], e["conv"][k])
+    increments = [p["wf_increment"] for p in props if "wf_increment" in p]
+    for inc in increments:  # every increment the file states is a time step the run's rate agrees with
+        assert isinstance(inc, float) and math.isfinite(inc) and inc > 0, f"wf_increment {inc!r} ignored"
+        assert abs(run.sample_rate_hz * inc - 1) <= 1e-5, (run.sample_rate_hz, inc)
+    if stated is not None:
+        assert abs(run.sample_rate_hz / stated - 1) <= 1e-5
+    if not increments:
+        assert run.sample_rate_hz == stated
+    offsets = [p["wf_start_offset"] for p in props if "wf_start_offset" in p]
+    if len(offsets) == 2:  # both say when they started: within half a sample of each other
+        assert all(isinstance(x, float) for x in offsets), f"wf_start_offset {offsets} not checked"
+        assert abs(offsets[0] - offsets[1]) * run.sample_rate_hz <= 0.5, offsets
+    assert run.channel_names == ("force", "acc_A_y")
+    assert [ch.unit for ch in run.channels] == ["N", "g"]
