@@ -452,3 +452,53 @@ def test_tdms_metadata_as_the_file_states_or_refused(e, seed):
         assert abs(offsets[0] - offsets[1]) * run.sample_rate_hz <= 0.5, offsets
     assert run.channel_names == ("force", "acc_A_y")
     assert [ch.unit for ch in run.channels] == ["N", "g"]
+
+
+WAV_SUBTYPES = ("PCM_16", "PCM_24", "PCM_32", "FLOAT", "DOUBLE", "PCM_U8")
+
+
+@st.composite
+def wav_files(draw):
+    return dict(
+        frames=draw(st.integers(1, 60)),
+        channels=draw(st.sampled_from([2, 2, 3, 1])),
+        rate=draw(st.sampled_from([51200, 48000, 8000, 1, 192000, 384000, 1000000]) | st.integers(1, 2**20)),
+        subtype=draw(st.sampled_from(WAV_SUBTYPES)),
+        stated=draw(st.sampled_from([None, None, "same", "other"])),
+        conv=draw(st.tuples(st.sampled_from(["scale", "mv", None]), st.sampled_from(["scale", "mv", None]))),
+        header_rate=draw(st.sampled_from([None] * 8 + [0, 2**32 - 1, 2**31])),
+    )
+
+
+@SETTINGS
+@given(e=wav_files(), seed=st.integers(0, 2**16))
+@example(e=dict(frames=16, channels=2, rate=51200, subtype="PCM_24", stated=None, conv=("scale", "mv"), header_rate=None),
+         seed=0)
+def test_wav_rate_length_and_samples_as_the_file_states_or_refused(e, seed):
+    import soundfile
+
+    rng = np.random.default_rng(seed)
+    data = rng.uniform(-0.9, 0.9, (e["frames"], e["channels"]))
+    stated = {None: None, "same": float(e["rate"]), "other": e["rate"] * 1.01}[e["stated"]]
+    with tempfile.TemporaryDirectory() as folder:
+        folder = Path(folder)
+        path = folder / "run.wav"
+        soundfile.write(path, data, e["rate"], subtype=e["subtype"])
+        if e["header_rate"] is not None:  # the fmt chunk's sample rate, after 'RIFF....WAVEfmt ....' and 4 bytes
+            raw = bytearray(path.read_bytes())
+            assert raw[12:16] == b"fmt "
+            raw[24:28] = int(e["header_rate"]).to_bytes(4, "little")
+            path.write_bytes(bytes(raw))
+        run = _read(_daq_setup(folder, "run.wav", "0", "1", e["conv"], stated))
+        if run is None:
+            return
+        block = run.read_block()
+        on_disk, rate = soundfile.read(path, dtype="float64", always_2d=True)
+    assert rate > 0 and run.sample_rate_hz == float(rate), (run.sample_rate_hz, rate)
+    assert e["header_rate"] is None or e["header_rate"] == rate
+    if stated is not None:
+        assert abs(run.sample_rate_hz / stated - 1) <= 1e-5
+    assert run.n_samples == e["frames"] == on_disk.shape[0] and run.n_samples >= 2
+    factor = np.array([{"scale": 0.5, "mv": 500.0, None: 1.0}[c] for c in e["conv"]]) * [1.0, 9.80665]
+    exact = 1e-12 if e["subtype"] in ("PCM_32", "DOUBLE") else 1e-6  # float32 holds 24 bits
+    np.testing.assert_allclose(block, on_disk[:, :2] * factor, rtol=exact, atol=1e-300)
