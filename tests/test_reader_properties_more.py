@@ -19,9 +19,11 @@ from __future__ import annotations
 import math
 import re
 import tempfile
+import warnings
 from pathlib import Path
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, event, example, given, settings
 from hypothesis import strategies as st
 
@@ -43,11 +45,17 @@ def _refused(exc: GuidefitError) -> None:
 
 
 def _read(path: Path):
-    """The file's first run, or None when refused with guidefit's own one-line error."""
-    try:
-        run = read_recording(path).runs[0]
-    except GuidefitError as exc:
-        _refused(exc)
+    """The file's first run, or None when refused with guidefit's own one-line error (and no numpy
+    warning before it: the command line would print it as a line of its own)."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", RuntimeWarning)
+        try:
+            run = read_recording(path).runs[0]
+        except GuidefitError as exc:
+            run = exc
+    assert not [w for w in caught if issubclass(w.category, RuntimeWarning)], [str(w.message) for w in caught]
+    if isinstance(run, GuidefitError):
+        _refused(run)
         return None
     event("read")
     return run
@@ -502,3 +510,107 @@ def test_wav_rate_length_and_samples_as_the_file_states_or_refused(e, seed):
     factor = np.array([{"scale": 0.5, "mv": 500.0, None: 1.0}[c] for c in e["conv"]]) * [1.0, 9.80665]
     exact = 1e-12 if e["subtype"] in ("PCM_32", "DOUBLE") else 1e-6  # float32 holds 24 bits
     np.testing.assert_allclose(block, on_disk[:, :2] * factor, rtol=exact, atol=1e-300)
+
+
+# ------------------------------------------------------------------ UFF-58 time data
+
+UFF_INCREMENTS = ("valid", "valid", "valid", "0", "-1.95313e-05", "nan", "inf", "1.00000e-320", "1.00000e+300",
+                  "other")
+UFF_STARTS = (0.0, 0.0, 0.0, 0.3, 0.7, 1e6, math.nan, math.inf)
+
+
+@st.composite
+def uff_files(draw):
+    """Two datasets 58 (force at the reference DOF, an acceleration) with up to two hostile fields."""
+    hostile = {
+        "inc": st.tuples(st.sampled_from(UFF_INCREMENTS), st.sampled_from(UFF_INCREMENTS)),
+        "start": st.tuples(st.sampled_from(UFF_STARTS), st.sampled_from(UFF_STARTS)),
+        "num_pts": st.tuples(st.sampled_from([0, -1, 1, 0, 5]), st.sampled_from([0, -1, 1, 0, 5])),
+        "labels": st.tuples(st.sampled_from(["N", "NONE", "lbf", "kN", "g"]),
+                            st.sampled_from(["m/s^2", "g", "NONE", "mm/s^2", "G", "m/s2", "N", ""])),
+        "spec": st.tuples(st.sampled_from([13, 13, 0, 1, 12, 9, 8, 11]), st.sampled_from([12, 12, 0, 13, 8, 11])),
+        "units164": st.sampled_from([1.0, 1e-3, math.nan, 4.448]),
+    }
+    keys = draw(st.sets(st.sampled_from(sorted(hostile)), max_size=2))
+    e = dict(UFF_VALID, n=draw(st.integers(2, 40)), fs=draw(st.sampled_from(RATES + (1e6, 3.0))))
+    e.update({key: draw(hostile[key]) for key in sorted(keys)})
+    return e
+
+
+UFF_VALID = dict(n=16, fs=51200.0, inc=("valid", "valid"), start=(0.0, 0.0), num_pts=(0, 0), labels=("N", "m/s^2"),
+                 spec=(13, 12), units164=None)
+UFF_ACC_UNITS = {"m/s^2": "m/s^2", "m/s2": "m/s^2", "none": "m/s^2", "": "m/s^2", "g": "g"}
+
+
+def _uff_write(path: Path, e: dict, seed: int) -> list[dict]:
+    """Write the two sets with pyuff, then put the drawn fields into their header lines (record 7)."""
+    import pyuff
+
+    rng = np.random.default_rng(seed)
+    fs, n = e["fs"], e["n"]
+    sets, stated = [], []
+    for k, (node, spec, label) in enumerate(zip((9, 1), e["spec"], e["labels"])):
+        data = rng.normal(size=n)
+        sets.append(pyuff.prepare_58(
+            binary=0, func_type=1, rsp_node=node, rsp_dir=2, ref_node=9, ref_dir=2, data=data, x=np.arange(n) / fs,
+            abscissa_spacing=1, abscissa_spec_data_type=17, ordinate_spec_data_type=spec, orddenom_spec_data_type=0,
+            ordinate_axis_units_lab=label, id1="NONE"))
+        inc = e["inc"][k]
+        inc = format(1 / fs, "13.5e") if inc == "valid" else (format(1 / (fs * 1.001), "13.5e") if inc == "other"
+                                                              else f"{inc:>13s}")
+        start = format(e["start"][k] / fs, "13.5e")
+        num_pts = n + e["num_pts"][k]
+        stated.append(dict(data=data, inc=float(inc), start=float(start), num_pts=num_pts, label=label, spec=spec))
+    if e["units164"] is not None:
+        sets.insert(0, pyuff.prepare_164(units_code=1, units_description="SI", temp_mode=1, length=e["units164"],
+                                         force=1.0, temp=1.0, temp_offset=273.15))
+    pyuff.UFF(str(path)).write_sets(sets, mode="overwrite")
+    lines = path.read_text().splitlines()
+    k = 0
+    for i, line in enumerate(lines):
+        if line.strip() == "58" and lines[i - 1].strip() == "-1":
+            s = stated[k]
+            lines[i + 7] = f"{4:10d}{s['num_pts']:10d}{1:10d}{format(s['start'], '13.5e'):>13s}" \
+                           f"{format(s['inc'], '13.5e'):>13s}{0.0:13.5e}"
+            k += 1
+    assert k == 2
+    path.write_text("\n".join(lines) + "\n")
+    return stated
+
+
+@SETTINGS
+@given(e=uff_files(), seed=st.integers(0, 2**16))
+@example(e=UFF_VALID, seed=0)
+# an abscissa increment of 1e-320 s: OverflowError, an internal error (exit 1)
+@example(e=dict(UFF_VALID, inc=("1.00000e-320", "1.00000e-320")), seed=0)
+# an abscissa minimum of NaN: the records' start times never compared (any comparison with NaN passes)
+@example(e=dict(UFF_VALID, start=(0.0, math.nan)), seed=0)
+# a displacement (8) at the reference DOF: read as the hammer force, in N
+@example(e=dict(UFF_VALID, spec=(8, 12), labels=("NONE", "m/s^2")), seed=0)
+# an increment of inf: pyuff's 'invalid value encountered in multiply' on stderr before the refusal
+@example(e=dict(UFF_VALID, inc=("inf", "valid")), seed=0)
+def test_uff58_time_metadata_as_the_file_states_or_refused(e, seed):
+    pytest.importorskip("pyuff")
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "run.uff"
+        stated = _uff_write(path, e, seed)
+        run = _read(path)
+        if run is None:
+            return
+        block = run.read_block()
+    force, acc = stated
+    assert force["num_pts"] == acc["num_pts"] == e["n"] == run.n_samples, "header and data lengths differ"
+    for s in stated:
+        assert math.isfinite(s["inc"]) and s["inc"] > 0
+        assert abs(run.sample_rate_hz * s["inc"] - 1) <= 5.1e-6, (run.sample_rate_hz, s["inc"])
+        assert math.isfinite(s["start"]), f"abscissa minimum {s['start']} never checked"
+    assert abs(force["start"] - acc["start"]) <= 0.5 * force["inc"], "records not simultaneous"
+    assert e["units164"] in (None, 1.0)
+    assert force["label"].lower() in ("n", "none", "") and force["spec"] in (13, 0, 1, 9)
+    assert acc["spec"] == 12
+    assert [ch.unit for ch in run.channels] == ["N", UFF_ACC_UNITS[acc["label"].lower()]]
+    np.testing.assert_array_equal(run.excitation_direction, [0.0, 1.0, 0.0])
+    np.testing.assert_array_equal(run.channels[1].direction, [0.0, 1.0, 0.0])
+    assert run.channel_names == ("force", "acc_A_y")
+    factor = np.array([1.0, 9.80665 if acc["label"].lower() == "g" else 1.0])
+    np.testing.assert_allclose(block, np.column_stack([force["data"], acc["data"]]) * factor, rtol=1e-11, atol=1e-300)
