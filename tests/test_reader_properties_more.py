@@ -614,3 +614,64 @@ def test_uff58_time_metadata_as_the_file_states_or_refused(e, seed):
     assert run.channel_names == ("force", "acc_A_y")
     factor = np.array([1.0, 9.80665 if acc["label"].lower() == "g" else 1.0])
     np.testing.assert_allclose(block, np.column_stack([force["data"], acc["data"]]) * factor, rtol=1e-11, atol=1e-300)
+
+
+# ------------------------------------------------------------------ ASAM MDF 4 through a setup
+
+
+MDF_VALID = dict(n=20, fs=51200.0, t0=0.0, defect=None, where=1, size=1, unit=("V", "V"), conv=("mv", "mv"),
+                 stated=None, two_groups=False)
+
+
+@st.composite
+def mdf_files(draw):
+    """A valid file and setup with its time channel's defect drawn, and up to two other fields hostile."""
+    hostile = {
+        "t0": st.sampled_from([2.5, 1.7e9]),
+        "unit": st.tuples(*[st.sampled_from(["V", "", "mV", "N", "g", "Pa"])] * 2),
+        "conv": st.sampled_from([("scale", None), (None, None), ("mv", "scale"), ("scale", "scale")]),
+        "stated": st.sampled_from(["same", "other"]),
+        "two_groups": st.just(True),
+    }
+    keys = draw(st.sets(st.sampled_from(sorted(hostile)), max_size=2))
+    n = draw(st.integers(2, 80))
+    e = dict(MDF_VALID, n=n, fs=draw(st.sampled_from(RATES)), defect=draw(st.sampled_from(DEFECTS + ("nan",))),
+             where=draw(st.integers(1, max(1, n - 1))), size=draw(st.integers(1, 3000)))
+    e.update({key: draw(hostile[key]) for key in sorted(keys)})
+    return e
+
+
+@SETTINGS
+@given(e=mdf_files(), seed=st.integers(0, 2**16))
+@example(e=MDF_VALID, seed=0)
+def test_mdf_time_channel_and_units_as_the_file_states_or_refused(e, seed):
+    pytest.importorskip("asammdf")
+    from asammdf import MDF, Signal
+
+    rng = np.random.default_rng(seed)
+    defect = None if e["defect"] == "nan" else e["defect"]
+    t = _true_times(e["n"], e["fs"], e["t0"], defect, e["where"], e["size"], rng)
+    if e["defect"] == "nan":
+        t[e["where"]] = np.nan
+    stated = {None: None, "same": e["fs"], "other": e["fs"] * 1.01}[e["stated"]]
+    with tempfile.TemporaryDirectory() as folder:
+        folder = Path(folder)
+        with MDF(version="4.10") as mdf:
+            signals = [Signal(rng.normal(size=e["n"]), t, name=name, unit=unit)
+                       for name, unit in zip(("Hammer", "AccA_Y"), e["unit"])]
+            if e["two_groups"]:  # the accelerometer in a second channel group, with its own time channel
+                mdf.append(signals[:1])
+                mdf.append(signals[1:])
+            else:
+                mdf.append(signals)
+            mdf.save(folder / "run.mf4", overwrite=True)
+        run = _read(_daq_setup(folder, "run.mf4", "Hammer", "AccA_Y", e["conv"], stated))
+    if run is None:
+        return
+    assert not e["two_groups"], "channels of two channel groups read as one run"
+    assert run.n_samples == e["n"] and np.all(np.isfinite(t))
+    assert _consistent(t - t[0], np.zeros(t.size), run.sample_rate_hz), (run.sample_rate_hz, e)
+    if stated is not None:
+        assert abs(run.sample_rate_hz / stated - 1) <= 1e-5
+    for k, unit in enumerate(("N", "g")):
+        assert _unit_allowed(e["unit"][k] or None, e["conv"][k], unit), (e["unit"][k], e["conv"][k])
