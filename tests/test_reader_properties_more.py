@@ -68,7 +68,7 @@ def _vector_text(v) -> str:
 # ------------------------------------------------------------------ contract CSV
 
 ODD_NAMES = ("acc_A_y ", " acc_B_x", '"acc_C_y"', "Acc_A_y", "acc_A_w", "acc A y", "acc_Ä_y", "acc_A_y\t",
-             "time", "acc_A_y;x", "acc_A_", "", "acc_A_y\x0b", "force")
+             "time", "acc_A_y;x", "acc_A_", "", "acc_A_y\x0b", "force", "acc_E_y", "acc_N12_z")
 
 
 @st.composite
@@ -168,7 +168,8 @@ def _csv_clean(e: dict) -> bool:
             and (e["units"] in (None, "default", "with_time") or (e["units"] == "bad_time" and not e["time"]))
             and e["positions"] in (None, "good") and e["directions"] in (None, "good", "flip")
             and e["excitation"] in ("0 -1 0", "-1 0 0", "0.6 0.8 0", "0 -1.0004 0")
-            and all(NAME_RE.match(n) for n in names) and len(set(names)) == len(names) and "force" in names)
+            and all(NAME_RE.match(n) for n in names) and len(set(names)) == len(names) and "force" in names
+            and (e["positions"] == "good" or all(n == "force" or n[4] in "ABCD" for n in names)))
 
 
 CSV_VALID = dict(n=40, fs=51200.0, names=["force", "acc_A_y"], time=".10g", defect=None, where=1, size=1, t0=0.0,
