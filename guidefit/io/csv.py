@@ -447,7 +447,8 @@ def _csv_time_rate(time: np.ndarray, rate: float | None, display: str) -> float:
     deviation = 0.0
     for a, b in _chunks(n):
         k = np.arange(a, b, dtype=np.float64)
-        deviation = max(deviation, float(np.max(np.abs(time[a:b] - time[0] - k / rate))) * rate)
+        # in sample periods, without dividing by the rate (a stated 5e-324 Hz would overflow)
+        deviation = max(deviation, float(np.max(np.abs((time[a:b] - time[0]) * rate - k))))
     if deviation > 0.5:
         raise RecordingError(
             f"{where}: spacing gives {fs:.6g} Hz but sample_rate_hz says {rate:.6g} Hz; expected them to agree"

@@ -558,6 +558,11 @@ def _check_starts(picked, daq: DaqFile, rate: float) -> None:
     for dc, (ns, offset) in starts[1:]:
         first, (ns0, offset0) = starts[0]
         apart = (ns - ns0) * 1e-9 + (offset - offset0)
+        if not math.isfinite(apart):
+            raise SetupError(
+                f"{daq.display}: channels '{first.name}' and '{dc.name}': start times (wf_start_time, "
+                "wf_start_offset) that are not finite numbers; a run's channels need one time base"
+            )
         if abs(apart) * rate > 0.5:
             raise SetupError(
                 f"{daq.display}: channels '{first.name}' and '{dc.name}' start {apart * 1e3:.6g} ms apart "
@@ -571,6 +576,12 @@ def _run_rate(picked, daq: DaqFile, run: SetupRun, display: str) -> float:
         file_rate = daq.rate_for(chans)
     else:
         own = [(dc, dc.sample_rate_hz) for dc in chans if dc.sample_rate_hz is not None]
+        for dc, r in own:
+            if not (math.isfinite(r) and r > 0):  # the file states a rate that is none: not taken from elsewhere
+                raise SetupError(
+                    f"{daq.display}: channel '{dc.name}': {daq.rate_origin} gives no sample rate (0, negative, "
+                    "not finite or not a number); expected the time step in s"
+                )
         for dc, r in own[1:]:
             if not same_rate(r, own[0][1]):
                 raise SetupError(

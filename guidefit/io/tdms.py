@@ -61,18 +61,23 @@ class TdmsSource(ColumnSource):
 
 
 def _rate(channel) -> float | None:
-    inc = channel.properties.get("wf_increment")
+    """``1 / wf_increment``; None when the channel has no ``wf_increment``, NaN when it has one that
+    is no time step (0, negative, not finite, text, or too small for its reciprocal to be finite):
+    the setup refuses a run that uses such a channel rather than take the rate from elsewhere."""
+    if "wf_increment" not in channel.properties:
+        return None
     try:
-        inc = float(inc)
+        inc = float(channel.properties["wf_increment"])
     except (TypeError, ValueError):
-        return None
-    if not math.isfinite(inc) or inc <= 0:
-        return None
+        return math.nan
+    if not math.isfinite(inc) or inc <= 0 or not math.isfinite(1.0 / inc):
+        return math.nan
     return nice_rate(1.0 / inc)
 
 
 def _start(channel) -> tuple | None:
-    """(wf_start_time in ns since 1970, wf_start_offset in s), or None when neither is given."""
+    """(wf_start_time in ns since 1970, wf_start_offset in s), or None when neither is given; an offset
+    of NaN when one is given that is no time (text, NaN): the setup cannot compare it, and refuses."""
     props = channel.properties
     if "wf_start_time" not in props and "wf_start_offset" not in props:
         return None
@@ -80,7 +85,7 @@ def _start(channel) -> tuple | None:
         ns = int(np.datetime64(props.get("wf_start_time", np.datetime64(0, "ns")), "ns").astype(np.int64))
         offset = float(props.get("wf_start_offset", 0.0))
     except (TypeError, ValueError):
-        return None
+        return 0, math.nan
     return ns, offset
 
 

@@ -61,7 +61,8 @@ Reading time data
 ignores the others (geometry, FRFs, ...). One run per reference DOF (node
 and direction), in the order they first appear. In a run, the force channel
 is the record whose ordinate is excitation force (specific data type 13),
-or, if none is, the record at the reference DOF itself; every other record
+or, if none is, the record at the reference DOF itself (of type unknown 0,
+general 1 or reaction force 9: a displacement there is no force); every other record
 must be an acceleration (type 12) and becomes ``acc_<point>_<axis>``: point
 A-D for nodes 1-4, ``N<node>`` otherwise (``acc_N12_z``), the axis from the
 direction code. A file written by guidefit (ID line 5 starts with
@@ -211,6 +212,7 @@ _ACC_LABELS = {
     "ms^-2": "m/s^2",
     "g": "g",
 }
+_REFERENCE_FORCE_SPECS = (SPEC_UNKNOWN, SPEC_GENERAL, 9)  # unknown, general, reaction force
 _FORCE_LABELS = {"": "N", "none": "N", "n": "N"}
 _INSTALL_HINT = "needs the optional extra: pip install 'guidefit[uff]'"
 
@@ -709,7 +711,8 @@ def _count_delimiters(raw: bytes) -> int:
 
 def _read_set(uff, i: int, kind: int, display: str, header_only: bool = False) -> dict:
     try:
-        out = uff.read_sets(i - 1, header_only=header_only)
+        with np.errstate(all="ignore"):  # pyuff's abscissa of an inf increment: no warning line before the refusal
+            out = uff.read_sets(i - 1, header_only=header_only)
     except Exception as exc:  # noqa: BLE001 - pyuff raises bare Exception
         raise RecordingError(
             f"{display}: set {i} (dataset {kind}): cannot be read ({_first_line(exc)})"
@@ -871,10 +874,12 @@ def _record(i: int, dset: dict, display: str) -> dict:
                 "expected one sample rate"
             )
         start = float(x[0])
-    if not (np.isfinite(inc) and inc > 0):
+    if not (np.isfinite(inc) and inc > 0 and np.isfinite(1.0 / inc)):
         raise RecordingError(
             f"{where}: abscissa increment {inc:g} s; expected a positive time step"
         )
+    if not np.isfinite(start):  # the records of a run are compared by it: NaN would pass any comparison
+        raise RecordingError(f"{where}: abscissa minimum {start:g} s; expected a finite start time")
     spec = int(dset.get("ordinate_spec_data_type", 0))
     label = str(dset.get("ordinate_axis_units_lab", "")).strip()
     return {
@@ -937,11 +942,12 @@ def _group_runs(records: list[dict], display: str) -> list[dict]:
                 )
         forces = [r for r in members if r["spec"] == SPEC_FORCE]
         if not forces:
-            forces = [r for r in members if r["rsp"] == ref and r["spec"] != SPEC_ACCELERATION]
+            # only an ordinate that may be a force: a displacement or velocity there is no hammer
+            forces = [r for r in members if r["rsp"] == ref and r["spec"] in _REFERENCE_FORCE_SPECS]
         if not forces:
             raise RecordingError(
                 f"{display}: run at {ref_text} (set {first['set']}...): no force record "
-                "(ordinate type 13, or a record at the reference DOF)"
+                "(ordinate type 13, or a record of type 0, 1 or 9 at the reference DOF)"
             )
         if len(forces) > 1:
             sets = ", ".join(str(r["set"]) for r in forces)
