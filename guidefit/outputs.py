@@ -47,7 +47,6 @@ __all__ = [
     "interrupted_exit",
     "one_line_warning",
     "quiet_unraisable",
-    "quiet_worker",
     "refuse_inputs",
     "register_children",
     "replacing",
@@ -552,15 +551,6 @@ def install_interrupt_handler() -> None:
     signal.signal(signal.SIGTERM, _stop_main_thread)
     _INSTALLED.set()
     threading.Thread(target=_watchdog, args=(read_fd,), name="guidefit-interrupt", daemon=True).start()
-
-
-def quiet_worker() -> None:
-    """Initializer of worker processes: Ctrl-C is the parent's to handle (no tracebacks from workers)."""
-    import signal
-
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    with contextlib.suppress(ValueError, OSError):
-        signal.set_wakeup_fd(-1)
 
 
 def handler_installed() -> bool:

@@ -21,7 +21,7 @@ from __future__ import annotations
 import os
 import sys
 
-__all__ = ["PARENT_POLL_S", "die_with_parent", "init_worker", "parent_death_signal"]
+__all__ = ["PARENT_POLL_S", "die_with_parent", "init_worker", "parent_death_signal", "quiet_worker"]
 
 #: Seconds between two looks at the parent where the kernel cannot watch it (not Linux).
 PARENT_POLL_S = 0.5
@@ -98,6 +98,16 @@ def die_with_parent(parent_pid: int) -> None:
                          daemon=True).start()
 
 
+def quiet_worker() -> None:
+    """Initializer of worker processes: Ctrl-C is the parent's to handle (no tracebacks from workers)."""
+    import contextlib
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    with contextlib.suppress(ValueError, OSError):
+        signal.set_wakeup_fd(-1)
+
+
 def init_worker(parent_pid: int) -> None:
     """Initializer of the ``--jobs`` workers: Ctrl-C and ``SIGTERM`` are the parent's to handle,
     and the worker dies with its parent (:func:`die_with_parent`).
@@ -108,8 +118,6 @@ def init_worker(parent_pid: int) -> None:
         ``os.getpid()`` of the command that creates the pool.
     """
     import signal
-
-    from guidefit.outputs import quiet_worker
 
     quiet_worker()
     signal.signal(signal.SIGTERM, signal.SIG_DFL)  # not the parent's handler, inherited by the fork
