@@ -195,8 +195,7 @@ def mat_files(draw):
 
 def _write_mat(folder: Path, e: dict, seed: int):
     import scipy.io
-
-    from tests.test_daq_formats import write_mat73
+    from test_daq_formats import write_mat73
 
     rng = np.random.default_rng(seed)
     variables = {"data": np.column_stack([np.sin(np.arange(e["n"]) * 0.3), np.cos(np.arange(e["n"]) * 0.3)])}

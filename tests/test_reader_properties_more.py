@@ -26,10 +26,10 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, event, example, given, settings
 from hypothesis import strategies as st
+from test_reader_properties import DEFECTS, RATES, _consistent, _printed_step, _true_times
 
 from guidefit.errors import GuidefitError
 from guidefit.io import read_recording
-from tests.test_reader_properties import DEFECTS, RATES, _consistent, _printed_step, _true_times
 
 SETTINGS = settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 AXES = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
