@@ -259,7 +259,7 @@ class Evidence:
     frequency: np.ndarray  # frequency cost
     visible: np.ndarray  # bool per model mode
     common_scale: float  # the recording's scale against the model's mass-normalised modes (1: as predicted)
-    run_factors: dict = field(default_factory=dict)  # run -> its scale against the others' (only runs off by > 3x)
+    run_factors: dict = field(default_factory=dict)  # run -> its scale against the others' (off by > 3x or reversed)
 
     @property
     def combined(self) -> np.ndarray:
@@ -356,9 +356,10 @@ def _run_scale(constants: list, run, phi: np.ndarray) -> float | None:
 
 
 def _run_factors(measured: list[Measured], runs: dict, phi: np.ndarray) -> dict:
-    """Runs whose modal constants are more than :data:`COMMON_SCALE_FACTOR` times the others' (a force or
-    sensitivity calibration of one run off by a unit factor: every mode of the run scaled alike), as
-    {run: factor against the run nearest the model's scale}; {} when the runs agree (or only one has a scale).
+    """Runs whose modal constants are more than :data:`COMMON_SCALE_FACTOR` times the others', or of the
+    opposite sign (a force or sensitivity calibration of one run off by a unit factor, or its hammer or
+    every accelerometer reversed: every mode of the run scaled alike), as {run: factor against the run
+    nearest the model's scale}; {} when the runs agree (or only one has a scale).
 
     Each run's scale is the median over its well-fitting modes of the driving-point scale against the model
     through its own sensors (:func:`_run_scale`); without this a run 1000 times the others would make the
@@ -368,13 +369,15 @@ def _run_factors(measured: list[Measured], runs: dict, phi: np.ndarray) -> dict:
     for name, run in runs.items():
         constants = [np.asarray(x.constants[name], float) for x in measured if name in x.constants]
         scale = _run_scale(constants, run, phi)
-        if scale is not None and scale > 0:
+        if scale is not None and scale != 0:
             scales[name] = scale
-    if len(scales) < 2 or max(scales.values()) <= COMMON_SCALE_FACTOR * min(scales.values()):
+    if len(scales) < 2:
         return {}
-    reference = min(scales.values(), key=lambda v: abs(math.log(v)))
+    # the reference: the run nearest the model's scale, among those of the model's sign if any
+    positive = [v for v in scales.values() if v > 0] or list(scales.values())
+    reference = min(positive, key=lambda v: abs(math.log(abs(v))))
     return {name: v / reference for name, v in scales.items()
-            if abs(math.log(v / reference)) > math.log(COMMON_SCALE_FACTOR)}
+            if v / reference < 0 or abs(math.log(v / reference)) > math.log(COMMON_SCALE_FACTOR)}
 
 
 def extra_costs(ev: Evidence) -> np.ndarray:

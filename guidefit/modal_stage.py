@@ -489,19 +489,29 @@ def _labelled(gf, candidates, per_run, frf_by_run, geometry, model, warnings, ba
     predicted = lab_mod.predicted_constants(model, views)
     ev = lab_mod.evidence(measured, views, model, predicted)
     decided = lab_mod.label_modes(measured, views, model, predicted, ev)
-    if ev.common_scale != 1.0:
-        from guidefit.consistency import scale_factor_hint
+    from guidefit.consistency import scale_factor_hint
 
+    reversed_ = ("the excitation_direction, or every accelerometer's direction, is reversed")
+    if ev.common_scale < 0:
+        size = abs(ev.common_scale)
+        warnings.append("every mode is in antiphase with the model at the hit point (modal constants "
+                        f"{ev.common_scale:.3g} times those the model predicts): {reversed_}"
+                        + (f"; and {scale_factor_hint(1 / size)}" if size != 1.0 else "")
+                        + "; labels were made at the recording's own scale and sign")
+    elif ev.common_scale != 1.0:
         # constants s times the model's: the data of a body 1/s times the carriage's mass (1000: a prefix, 9.81: g)
-        warnings.append(f"the modal constants are {abs(ev.common_scale):.3g} times those the model predicts for a "
-                        f"carriage of {mass_kg:.3g} kg at these sensors ({scale_factor_hint(1 / abs(ev.common_scale))}"
+        warnings.append(f"the modal constants are {ev.common_scale:.3g} times those the model predicts for a "
+                        f"carriage of {mass_kg:.3g} kg at these sensors ({scale_factor_hint(1 / ev.common_scale)}"
                         "; labels were made at the recording's own scale)")
     for run, factor in ev.run_factors.items():
-        from guidefit.consistency import scale_factor_hint
-
-        warnings.append(f"run '{run}': its modal constants are {factor:.3g} times the other runs' (every mode "
-                        f"alike; {scale_factor_hint(1 / factor)}, in this run's force or accelerometer calibration); "
-                        "labels were made with each run at its own scale; K and c do not depend on it")
+        size = abs(factor)
+        what = (f"every mode in antiphase with the other runs' (modal constants {factor:.3g} times theirs): in this "
+                f"run {reversed_}" if factor < 0 else
+                f"its modal constants are {factor:.3g} times the other runs' (every mode alike")
+        if size > lab_mod.COMMON_SCALE_FACTOR or size < 1 / lab_mod.COMMON_SCALE_FACTOR:
+            what += f"; {scale_factor_hint(1 / size)}, in this run's force or accelerometer calibration"
+        warnings.append(f"run '{run}': {what}{')' if factor > 0 else ''}; labels were made with each run at its own "
+                        "scale and sign; K and c do not depend on it")
     visible = dict(zip(model.labels, lab_mod.visible_modes(predicted)))
     modes, extras = [], []
     for c, dec in zip(candidates, decided):
