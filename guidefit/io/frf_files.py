@@ -478,13 +478,21 @@ def _read_h5_run(display: str, root, name: str, guide):
             if np.shape(sums[k]) != shape or not np.all(np.isfinite(sums[k])):
                 raise RecordingError(f"{where}: group_sums/{k} has shape {np.shape(sums[k])} or non-finite "
                                      f"values; expected finite {shape}")
-    estimator = _text(a.get("estimator")) or "H1"
-    n_avg = int(np.asarray(a.get("n_averages", 0)).reshape(-1)[0])
-    rate = _optional_float(a, "sample_rate_hz", where)
     notes = []
-    if rate is None or rate <= 0:
+    estimator = _text(a.get("estimator"))
+    if estimator is None:
+        estimator = "H1"
+        notes.append(f"run '{name}': no estimator in the file; its FRFs taken as H1")
+    elif estimator not in ("H1", "H2", "Hv"):
+        raise RecordingError(f"{where}: estimator {estimator!r} is not one of H1, H2, Hv")
+    n_avg = _count(a.get("n_averages", 0), f"{where}: n_averages")
+    rate = _optional_float(a, "sample_rate_hz", where)
+    if rate is None:
         rate = 2.0 * float(f[-1])
         notes.append(f"run '{name}': no sample rate in the file; taken as twice the highest frequency ({rate:g} Hz)")
+    elif not (math.isfinite(rate) and rate > 2.0 * float(f[-1]) * (1 - 1e-9)):
+        raise RecordingError(f"{where}: sample_rate_hz {rate:g} is not a rate above twice the highest "
+                             f"frequency ({f[-1]:g} Hz)")
     frf = FrfSet(run=name, frequency_hz=f, channels=channels, H=H, coherence=coh, estimator=estimator,
                  n_averages=n_avg, group_sums=sums, exp_window_tau_s=_optional_seconds(a, "exp_window_tau_s", where),
                  force_window_s=_optional_seconds(a, "force_window_s", where),
@@ -578,6 +586,18 @@ def holds_frfs(path) -> bool:
             return False
         return 4 in types and 1 not in types
     return False
+
+
+def _count(value, where: str) -> int:
+    """A non-negative whole number of an attribute (n_averages), or one RecordingError."""
+    v = np.asarray(value).reshape(-1)
+    try:
+        x = float(v[0]) if v.size == 1 else math.nan
+    except (TypeError, ValueError):
+        x = math.nan
+    if not (math.isfinite(x) and x >= 0 and x == int(x)):
+        raise RecordingError(f"{where}: {v.tolist() if v.size < 5 else v.shape} is not a count (a whole number >= 0)")
+    return int(x)
 
 
 def read_frf_file(path) -> FrfFile:
