@@ -133,7 +133,9 @@ def infer_excitation_direction(frf) -> np.ndarray:
     >>> infer_excitation_direction(frf).tolist()
     [0.0, 1.0, 0.0]
     """
-    energy = np.sum(np.abs(np.asarray(frf.H)) ** 2, axis=0)
+    magnitude = np.abs(np.asarray(frf.H))
+    top = float(magnitude.max(initial=0.0))
+    energy = np.sum((magnitude / top) ** 2, axis=0) if 0 < top < math.inf else np.sum(magnitude, axis=0)
     by_axis = {"x": 0.0, "y": 0.0}
     for name, e in zip(frf.channels, energy):
         axis = name.rsplit("_", 1)[-1]
