@@ -386,7 +386,7 @@ def _force_offset(quiet_force: np.ndarray, pulse_force: np.ndarray) -> float:
     Smaller offsets are noise-level (and AC-coupled amplifiers drift that much after a hit), left as
     they are; a larger one is a bias whose windowed rectangle would add to the force spectrum.
     """
-    from guidefit.hits import _median  # np.median's value for finite samples, 3x faster on a record
+    from guidefit.hit_checks import _median  # np.median's value for finite samples, 3x faster on a record
 
     quiet_force = np.ascontiguousarray(quiet_force, dtype=float)
     finite = np.isfinite(quiet_force).all()

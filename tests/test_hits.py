@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import guidefit.hit_checks as hit_checks
 import guidefit.hits as hits_module
 from guidefit.hits import (
     REJECTION_CODES,
@@ -231,13 +232,13 @@ def test_clipping_criterion_on_many_simulated_oscillations():
         envelope = np.cos(w * t) * np.exp(-np.abs(t) / rng.uniform(50, 5000))
         smooth = 10 ** rng.uniform(0.5, 4.5) * envelope + noise
         if np.abs(smooth).max() < 32767:
-            false_alarms += hits_module._flat_top(np.round(smooth) * 0.0625, 3) is not None
+            false_alarms += hit_checks._flat_top(np.round(smooth) * 0.0625, 3) is not None
         rail = rng.choice([32767, 2047])
         x = rail * (1 + 10 ** rng.uniform(np.log10(0.05), 0.7)) * envelope + noise
         q = np.clip(np.round(x), -rail - 1, rail)
         if np.abs(x).max() >= 1.05 * rail and max(longest_flat_top(q), longest_flat_top(-q)) >= 3:
             clipped_total += 1
-            missed += hits_module._flat_top(q * 0.0625, 3) is None
+            missed += hit_checks._flat_top(q * 0.0625, 3) is None
     assert false_alarms == 0
     assert clipped_total > 500 and missed <= 0.01 * clipped_total, (missed, clipped_total)
 
@@ -589,12 +590,12 @@ def _reference_flat_top(x, min_run):
 def _reference_assess(data, run, s, pre, median_peak, force_base=None):
     """hits._assess written plainly: every channel and question in its own full pass."""
     names, fs, fi, n = run.channel_names, run.sample_rate_hz, run.force_index, data.shape[0]
-    metrics = dict.fromkeys(hits_module._METRICS, np.nan)
+    metrics = dict.fromkeys(hit_checks._METRICS, np.nan)
     finite = np.isfinite(data)
     if not finite.all():
         bad = [names[c] for c in np.flatnonzero(~finite.all(axis=0))]
         force = data[:, fi][finite[:, fi]]
-        peak = hits_module._signed_extreme(force - np.median(force)) if force.size else np.nan
+        peak = hit_checks._signed_extreme(force - np.median(force)) if force.size else np.nan
         count = int((~finite).sum())
         return ["non_finite"], [f"non_finite: {count} NaN/Inf sample(s) in {', '.join(bad)}"], peak, pre, metrics
     quiet = slice(0, pre - 2) if pre is not None and pre >= 16 else None
@@ -625,7 +626,7 @@ def _reference_assess(data, run, s, pre, median_peak, force_base=None):
     if peak < limit:
         codes.append("too_weak")
         reasons.append(f"too_weak: peak {peak:.4g} N below {limit:.4g} N ({why})")
-    double = hits_module._double_hit(fc, p, peak, fs, s, metrics)
+    double = hit_checks._double_hit(fc, p, peak, fs, s, metrics)
     if double:
         codes.append("double_hit")
         reasons.append(f"double_hit: {double}")
@@ -686,7 +687,7 @@ def _reference_stored_hits(run, s, length):
         quiet = finite[: pre - 2] if pre is not None and pre >= 16 else finite
         base = force[: quiet.size][quiet]
         if base.size:
-            peaks.append(abs(hits_module._signed_extreme(force[finite] - np.median(base))))
+            peaks.append(abs(hit_checks._signed_extreme(force[finite] - np.median(base))))
     median_peak = float(np.median(peaks)) if peaks else None
     out = []
     for i in range(run.n_hits_stored):
@@ -794,7 +795,7 @@ def test_fast_median_is_numpy_median():
             x = np.sin(2 * np.pi * t / rng.integers(2, 5000)) * np.exp(-t / rng.integers(100, 100_000))
         else:
             x = np.sort(rng.standard_normal(n))[:: 1 if trial % 2 else -1].copy()
-        got, want = hits_module._median(x), np.median(x)
+        got, want = hit_checks._median(x), np.median(x)
         assert got == want and type(got) is type(want), (trial, n)
 
 
@@ -921,7 +922,7 @@ def test_rows_from_raw_is_the_plain_conversion_and_its_extremes(n, dtype):
             data[n - 1, 2] = -bad
         for sc in (None, scale):
             rows = np.empty((3, n))
-            tops, bottoms = hits_module._rows_from_raw(rows, data, sc)
+            tops, bottoms = hit_checks._rows_from_raw(rows, data, sc)
             want = data.T.astype(np.float64) * (1.0 if sc is None else sc[:, None])
             # one correctly rounded IEEE multiply per element, no reduction order: equal on any CPU
             np.testing.assert_array_equal(rows, want)

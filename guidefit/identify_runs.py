@@ -1,0 +1,494 @@
+"""The per-run modal stage of :mod:`guidefit.identify`: fits, refits, force levels, selection, warnings.
+
+One run's modal fit (:func:`_fit_run`: per-run curve fits in the search band,
+with refits in a narrow band and the delete-a-group jackknife), the force-level
+refits (:func:`_force_levels`), the choice among candidates of several runs
+(:func:`_select`) and the quality and excitation warnings that both the
+per-run and the global path add. They are separate from
+:mod:`guidefit.identify`, which holds the joint parameters (Eq. 24-29), the
+result types and the pipeline that calls these stages, so that the pipeline
+reads in one module and the stage code in another. Nothing here imports
+:mod:`guidefit.identify`; the names used elsewhere stay importable from it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from guidefit.errors import IdentificationError
+from guidefit.modeshapes import (
+    UNNAMED_LABELS,
+    IdentifiedMode,
+    _coherence_at,
+    _half_power_entry,
+    energy_shares,
+    real_shape,
+    rigid_body_motion,
+    sensor_matrix,
+)
+
+JOINT_LABELS = {"V": "vertical", "H": "roll_low"}
+
+
+def _search_band(model, run, settings) -> tuple[float, float]:
+    f_lo = settings.f_min_hz or 0.35 * float(np.min(model.frequencies_hz))
+    f_hi = settings.f_max_hz or 1.3 * float(np.max(model.frequencies_hz))
+    return f_lo, min(f_hi, 0.4 * run.sample_rate_hz)
+
+
+def _hit_row(run_name: str, hit) -> dict:
+    return {"run": run_name, "hit": int(hit.index), "start_sample": int(hit.start_sample),
+            "peak_force_n": float(hit.peak_force_n), "accepted": bool(hit.accepted), "reason": hit.reason}
+
+
+def _narrow_band(mode) -> tuple[float, float]:
+    """A band around one fitted mode: +/- max(3 zeta, 3 %) of its frequency."""
+    half_width = max(3 * mode.damping_ratio, 0.03) * mode.frequency_hz
+    return mode.frequency_hz - half_width, mode.frequency_hz + half_width
+
+
+def _refit_one(frf, mode, max_nfev: int = 20, uncertainty: bool = True):
+    """Refit one mode in its narrow band, starting from ``mode`` (None when the fit fails)."""
+    from guidefit import curvefit
+
+    try:
+        return curvefit.fit_modes(frf.frequency_hz, frf.H, _narrow_band(mode), 1, initial=[mode],
+                                   max_nfev=max_nfev, uncertainty=uncertainty)[0]
+    except (IdentificationError, ValueError, np.linalg.LinAlgError):
+        return None
+
+
+def _band_of(frf, f_lo_hz: float, f_hi_hz: float):
+    """The FrfSet restricted to the bins in [f_lo_hz, f_hi_hz] (group sums included).
+
+    The jackknife replicates then re-estimate a few hundred bins instead of
+    the whole spectrum.
+    """
+
+    sel = (frf.frequency_hz >= f_lo_hz) & (frf.frequency_hz <= f_hi_hz)
+    sums = {k: (v if k == "n_hits" else np.asarray(v)[:, sel]) for k, v in frf.group_sums.items()}
+    return replace(frf, frequency_hz=frf.frequency_hz[sel], H=frf.H[sel],
+                   coherence=frf.coherence[sel], group_sums=sums)
+
+
+def _refit_in_band(frf, mode, run_fits, max_nfev: int = 40):
+    """Refit ``mode`` in its narrow band on an FRF from which its near neighbours are taken out.
+
+    The run's other modes (``run_fits``: (Mode, label) of its all-hits fit)
+    outside the band whose own narrow band reaches into it are subtracted
+    (:func:`guidefit.modes.synthesize`; channels then weighted by the share
+    and relative amplitude of the band's modes in them), those inside are
+    fitted with it, distant ones are left to the residual terms. A
+    single-mode refit of the FRF itself is pulled by a neighbour: the flank
+    of the 10 %-damped roll_low cut by pitch's +/- 6 % band biased pitch by
+    +0.12 % on a linear recording, and pitch inside roll_low's +/- 31 % band
+    pulled roll_low by 8 % in a vertical run. The band stays +/- max(3 zeta, 3 %), widened bin by bin until it
+    holds enough bins: the estimator that explain's amplitude model follows.
+    Tried in turn: with every mode in the band, with its labelled ones only
+    (an extra peak may be a second pole of one amplitude-dependent peak,
+    which a subset of the hits does not support), alone. The first refit
+    whose pole stays within half the mode's bandwidth (``zeta f``) of the
+    all-hits fit, as in ``modes.auto_fit``'s joint refit, and whose shape
+    keeps a MAC of :data:`REFIT_MIN_MAC` with it is returned (None when none
+    does), with the band (Hz).
+    """
+    import warnings as _w
+
+    from guidefit import curvefit
+    from guidefit import modes as modes_mod
+
+    lo, hi = _narrow_band(mode)
+    f = frf.frequency_hz
+    step = float(np.median(np.diff(f)))
+
+    def inside_band():
+        return [(m, lab) for m, lab in run_fits if m is not mode and lo < m.frequency_hz < hi]
+
+    inside = inside_band()
+    # at least 4 bins more than a fit of every mode in the band needs (modes.fit_band: 3 n + 5)
+    while np.count_nonzero((f > lo) & (f < hi)) < 3 * (len(inside) + 1) + 9 and hi - lo < mode.frequency_hz:
+        lo, hi = lo - step, hi + step
+        inside = inside_band()
+    # near neighbours, whose own band reaches into this one, are subtracted; distant modes are left to the
+    # residual terms, as in any narrow-band fit
+    outside = [m for m, _ in run_fits if m is not mode and not lo < m.frequency_hz < hi
+               and _narrow_band(m)[0] < hi and _narrow_band(m)[1] > lo]
+    H, weights = frf.H, None
+    if outside:
+        try:
+            H = H - modes_mod.synthesize(f, outside)
+            # fit_modes scales every channel to unit RMS in the band: a channel that the band's modes
+            # hardly move (pitch in x) would be what the subtraction leaves, scaled up; weight each
+            # channel by the share of the band's modes in it instead
+            sel = (f > lo) & (f < hi)
+            own = np.sqrt(np.mean(np.abs(modes_mod.synthesize(f[sel], [mode] + [m for m, _ in inside])) ** 2, axis=0))
+            share = own / np.maximum(np.sqrt(np.mean(np.abs(H[sel]) ** 2, axis=0)), 1e-300)
+            # ... and by its amplitude relative to the strongest channel (both parts tiny: not a datum)
+            weights = np.broadcast_to(np.clip(share, 0.0, 1.0) * own / max(float(own.max()), 1e-300), H.shape)
+        except ValueError:  # residues of another channel set: refit the FRF as it is
+            H, weights = frf.H, None
+    tries, seen = [], set()
+    for others in ([m for m, _ in inside], [m for m, lab in inside if lab != "extra"], []):
+        key = tuple(id(m) for m in others)
+        if key not in seen:
+            seen.add(key)
+            tries.append(sorted([mode, *others], key=lambda m: m.frequency_hz))
+    for group in tries:
+        try:
+            with _w.catch_warnings():
+                _w.simplefilter("ignore")
+                fits = curvefit.fit_modes(f, H, (lo, hi), len(group), initial=group, weights=weights,
+                                           max_nfev=max_nfev if len(group) > 1 else 20)
+        except (IdentificationError, ValueError, np.linalg.LinAlgError):
+            continue
+        r = fits[group.index(mode)]  # both sorted by frequency
+        if (abs(r.frequency_hz - mode.frequency_hz) <= mode.damping_ratio * mode.frequency_hz
+                and _mac(r.modal_constants, mode.modal_constants) >= REFIT_MIN_MAC):
+            return r, (lo, hi)
+    return None, (lo, hi)
+
+
+#: A force-level refit whose shape has a lower MAC with the all-hits shape is not the same mode.
+REFIT_MIN_MAC = 0.9
+
+
+def _mac(a, b) -> float:
+    """Modal assurance criterion of two real shapes (:func:`real_shape` of modal constants)."""
+    x, y = real_shape(a), real_shape(b)
+    den = float((x @ x) * (y @ y))
+    return float((x @ y) ** 2 / den) if den > 0 else 0.0
+
+
+def _jackknife(frf, modes) -> list[tuple[float | None, float | None]]:
+    """Delete-a-group jackknife std of (f_n, zeta) for each mode; None where too few groups.
+
+    Each leave-one-group-out FRF is refitted mode by mode in a narrow band
+    around the full fit (one mode and residual terms), which is what makes
+    the jackknife affordable; the full fit's neighbours are outside the band
+    or absorbed by the residual terms. The replicates are made one at a time,
+    so memory holds one extra FRF set whatever the number of groups.
+    """
+    import warnings as _w
+
+    if not modes or not hasattr(frf, "leave_one_group_out") or getattr(frf, "n_groups", 0) < 3:
+        return [(None, None)] * len(modes)
+    fits: list[list] = [[] for _ in modes]
+    lo = min(_narrow_band(m)[0] for m in modes)
+    hi = max(_narrow_band(m)[1] for m in modes)
+    with _w.catch_warnings():
+        _w.simplefilter("ignore")
+        for sub in _band_of(frf, lo, hi).leave_one_group_out():
+            for k, mode in enumerate(modes):
+                r = _refit_one(sub, mode, uncertainty=False)
+                if r is not None:
+                    fits[k].append(r)
+            del sub
+    out = []
+    for mode_fits in fits:
+        n = len(mode_fits)
+        if n < 3:
+            out.append((None, None))
+            continue
+        fk = np.array([r.frequency_hz for r in mode_fits])
+        zk = np.array([r.damping_ratio for r in mode_fits])
+        out.append((math.sqrt((n - 1) / n * np.sum((fk - fk.mean()) ** 2)),
+                    math.sqrt((n - 1) / n * np.sum((zk - zk.mean()) ** 2))))
+    return out
+
+
+def _with_jackknife(modes: list, frf_by_run: dict) -> list:
+    """The selected joint modes (vertical, roll_low) with the hit-group jackknife in their std.
+
+    The jackknife's eight refits per mode are most of identify's time, so it
+    runs for the modes behind the joint parameters only, after selection;
+    the other modes keep the curve fit's own standard error.
+    """
+
+    out = []
+    for m in modes:
+        if m.label in JOINT_LABELS.values() and m.fit is not None:
+            (jk_f, jk_z), = _jackknife(frf_by_run[m.run], [m.fit])
+            m = replace(m, frequency_std_hz=_combine(jk_f, m.fit.frequency_std_hz),
+                        damping_std=_combine(jk_z, m.fit.damping_std))
+        out.append(m)
+    return out
+
+
+MIN_BINS_IN_BAND = 8  # fewer FRF bins than this in the search band: no mode fit is attempted
+
+
+def _fit_run(run, frf, guide, model, settings, warnings: list) -> list[IdentifiedMode]:
+    from guidefit import curvefit
+    from guidefit import frf as frf_mod
+    from guidefit import modes as modes_mod
+    from guidefit.model import vibration as vib
+
+    band = _search_band(model, run, settings)
+    if not band[1] > band[0] * 1.05:
+        warnings.append(f"run '{run.name}': sample rate {run.sample_rate_hz:g} Hz too low for the modes "
+                        f"searched from {band[0]:.0f} Hz (needs at least {band[0] / 0.4:.0f} Hz)")
+        return []
+    freq = np.asarray(frf.frequency_hz)
+    if np.count_nonzero((freq >= band[0]) & (freq <= band[1])) < MIN_BINS_IN_BAND:
+        n = 2 * (len(freq) - 1)
+        warnings.append(f"run '{run.name}': records of about {n} samples give {freq[-1] / max(len(freq) - 1, 1):.0f} Hz "
+                        f"resolution, too coarse for the modes between {band[0]:.0f} and {band[1]:.0f} Hz "
+                        f"(fewer than {MIN_BINS_IN_BAND} bins); longer records are needed")
+        return []
+    try:
+        import warnings as _w
+
+        with _w.catch_warnings(record=True) as caught:
+            _w.simplefilter("always")
+            fitted = curvefit.auto_fit(frf.frequency_hz, frf.H, band[0], band[1])
+        for w in caught:
+            if issubclass(w.category, modes_mod.ModeFitWarning):
+                warnings.append(f"run '{run.name}': {w.message}")
+    except IdentificationError as exc:
+        warnings.append(f"run '{run.name}': no mode found between {band[0]:.0f} and {band[1]:.0f} Hz ({exc})")
+        return []
+    fitted = sorted(fitted, key=lambda m: m.frequency_hz)
+    sensors = sensor_matrix(frf_channels(run, frf))
+    mass = vib.carriage_mass_matrix(vib.model_from_guide(guide))
+    tau = getattr(frf, "exp_window_tau_s", None)
+    candidates = []
+    for mode in fitted:
+        f_n, zeta = mode.frequency_hz, mode.damping_ratio
+        if tau:
+            f_n, zeta = frf_mod.exponential_window_damping_correction(zeta, f_n, tau)
+        shape = real_shape(mode.modal_constants)
+        q, _observed = rigid_body_motion(shape, sensors)
+        norm = np.linalg.norm(q) or 1.0
+        q = q / norm
+        energy = energy_shares(q, mass)
+        f_std, z_std = mode.frequency_std_hz, mode.damping_std
+        candidates.append({
+            "mode": mode, "frequency_hz": f_n, "damping_ratio": zeta, "q": q, "energy": energy,
+            "shape": shape,
+            "f_std": f_std, "z_std": z_std,
+        })
+    candidates = _significant(candidates)
+    from guidefit import labels as lab_mod
+
+    view = {run.name: lab_mod.RunView(frf_channels(run, frf), tuple(run.excitation_direction),
+                                      None if run.excitation_position_m is None
+                                      else tuple(run.excitation_position_m))}
+    decided = lab_mod.label_modes([lab_mod.Measured(float(c["frequency_hz"]), {run.name: c["shape"]})
+                                   for c in candidates], view, model)
+    out = []
+    names = [ch.name for ch in frf_channels(run, frf)]
+    for c, dec in zip(candidates, decided):
+        mode = c["mode"]
+        label = "extra" if dec.label == "ambiguous" else dec.label  # one run alone: not told apart is extra
+        model_f = model.frequency_hz(label) if label in model.labels else None
+        out.append(IdentifiedMode(
+            label=label, run=run.name, frequency_hz=float(c["frequency_hz"]),
+            damping_ratio=float(c["damping_ratio"]),
+            frequency_std_hz=c["f_std"], damping_std=c["z_std"], model_frequency_hz=model_f,
+            shape=dict(zip(names, (float(v) for v in c["shape"]))),
+            motion=tuple(float(v) for v in c["q"]), energy={k: float(v) for k, v in c["energy"].items()},
+            coherence=_coherence_at(frf, mode.peak_frequency_hz, mode.residues),
+            half_power=_half_power_entry(frf, mode, tau), raw_damping_ratio=float(mode.damping_ratio),
+            fit=mode, label_basis=dec.basis, label_note=dec.note, label_mac=dec.mac, label_scale=dec.scale,
+        ))
+    return out
+
+
+def _force_levels(run, frf, rows, modes, settings, warnings: list) -> list[dict]:
+    """Frequencies of the run's labelled modes per hit-force bin (terciles of the accepted hits).
+
+    Each bin's hits are averaged into their own FRF with the run's windows and
+    each mode is refitted in its narrow band, its near neighbours subtracted
+    and the modes inside the band fitted with it (:func:`_refit_in_band`); a
+    preloaded Hertz contact shows as a frequency that falls with force. Only
+    when the forces differ by at least ``min_force_ratio``; every bin needs
+    two hits. A level gives the bin's mean peak force and its hits' peak
+    forces (``hit_forces_n``: H1 weights each hit's FRF by its force squared,
+    so the bin's frequency is that of its force-squared weighted hits, not of
+    the mean force), the refit's band (``band_hz``) and shape (``shape``,
+    real modal constants per channel). A bin whose hits do not reproduce the
+    mode (the refit moves it by more than ``zeta f`` or to a MAC below
+    :data:`REFIT_MIN_MAC`) gives a level without a frequency
+    (``refit_failed``), and the mode is left out of its neighbours' refits of
+    that bin.
+
+    Only modes with a model label get levels: a level names the model mode
+    whose trend it carries (``explain`` and the modes-file reader accept only
+    those). An ``extra`` mode is a neighbour in the others' refits; an
+    ``ambiguous`` one is refitted too (a bin that does not reproduce it
+    leaves it out of its neighbours' refits), but neither gives a level.
+    """
+    from guidefit import frf as frf_mod
+    from guidefit.hits import HitSettings, iter_hits
+
+    accepted = [r for r in rows if r["accepted"]]
+    fitted = sorted((m for m in modes if m.label != "extra" and m.fit is not None), key=lambda m: m.frequency_hz)
+    run_fits = [(m.fit, m.label) for m in modes if m.fit is not None]  # extra peaks pull a neighbour too
+    if not fitted or len(accepted) < 2 * settings.force_bins:
+        return []
+    forces = np.array([r["peak_force_n"] for r in accepted])
+    if forces.max() < settings.min_force_ratio * forces.min():
+        return []
+    window = frf_mod.WindowSettings(force_window_s=frf.force_window_s, exp_tau_s=frf.exp_window_tau_s) \
+        if frf.exp_window_tau_s else frf_mod.WindowSettings(none=True)
+    names = [ch.name for ch in frf_channels(run, frf)]
+    levels = []
+    for level_index, members in enumerate(np.array_split(np.argsort(forces), settings.force_bins)):
+        wanted = {accepted[i]["hit"] for i in members}
+        hits = (h for h in iter_hits(run, settings.hits or HitSettings()) if h.index in wanted)
+        try:
+            sub = frf_mod.compute_frf(run, hits, estimator=settings.estimator, window=window,
+                                      precision=frf.fft_precision, max_frequency_hz=frf_mod.top_of(frf))
+        except IdentificationError as exc:
+            warnings.append(f"run '{run.name}': force-level FRF failed ({exc})")
+            return []
+        # a narrow band around each mode, the run's other modes subtracted or refitted with it: robust
+        # against modes trading places, and a neighbour cannot pull it. A mode that this bin's hits do not
+        # reproduce is then left out of its neighbours' refits: its all-hits fit would pull them instead
+        refits = {id(m): _refit_in_band(sub, m.fit, run_fits) for m in fitted}
+        failed = {id(m.fit) for m in fitted if refits[id(m)][0] is None}
+        if failed:
+            kept = [(fit, lab) for fit, lab in run_fits if id(fit) not in failed]
+            refits.update({id(m): _refit_in_band(sub, m.fit, kept) for m in fitted if id(m.fit) not in failed})
+        for m in fitted:
+            if m.label in UNNAMED_LABELS:
+                continue  # an ambiguous mode: refitted above as a neighbour; a level needs a model label
+            r, band = refits[id(m)]
+            level = {"run": run.name, "label": m.label, "level": level_index,
+                     "peak_force_n": float(np.mean(forces[members])),
+                     "n_hits": int(len(members)), "hit_forces_n": [float(x) for x in np.sort(forces[members])],
+                     "frequency_hz": None, "frequency_std_hz": None, "band_hz": [float(x) for x in band],
+                     "hit_position_m": None if run.excitation_position_m is None
+                     else [float(x) for x in run.excitation_position_m],
+                     "hit_direction": [float(x) for x in run.excitation_direction]}
+            if r is None:  # the mode is not reproduced by this bin's hits: a level without a frequency
+                level["refit_failed"] = True
+            else:
+                f_n, z_n = r.frequency_hz, r.damping_ratio
+                if frf.exp_window_tau_s:
+                    f_n, z_n = frf_mod.exponential_window_damping_correction(r.damping_ratio, r.frequency_hz,
+                                                                           frf.exp_window_tau_s)
+                level["frequency_hz"], level["frequency_std_hz"] = float(f_n), r.frequency_std_hz
+                level["damping_ratio"], level["damping_std"] = float(z_n), r.damping_std
+                level["shape"] = dict(zip(names, (float(v) for v in real_shape(r.modal_constants))))
+            levels.append(level)
+    return levels
+
+
+MIN_RELATIVE_AMPLITUDE = 5e-3
+MAX_RELATIVE_FREQUENCY_STD = 3e-2
+
+
+def _significant(candidates: list[dict]) -> list[dict]:
+    """Drop computational modes of the curve fit: modes whose largest modal constant is below
+    0.5 % of the run's strongest mode, or whose frequency is uncertain by more than 3 %.
+
+    A real but weakly excited mode (an extra base mode, say) passes both tests
+    on any usable recording; a fitted pole that only absorbs noise or a flank
+    fails them.
+    """
+    if not candidates:
+        return candidates
+    top = max(float(np.max(np.abs(c["shape"]))) for c in candidates) or 1.0
+    keep = []
+    for c in candidates:
+        amplitude = float(np.max(np.abs(c["shape"]))) / top
+        rel_std = (c["f_std"] or 0.0) / c["frequency_hz"]
+        if amplitude >= MIN_RELATIVE_AMPLITUDE and rel_std <= MAX_RELATIVE_FREQUENCY_STD:
+            keep.append(c)
+    return keep
+
+
+def _combine(a: float | None, b: float | None) -> float | None:
+    """Root-sum-square of two standard deviations, ignoring missing ones."""
+    vals = [float(v) for v in (a, b) if v is not None and math.isfinite(v)]
+    return math.sqrt(sum(v * v for v in vals)) if vals else None
+
+
+def frf_channels(run, frf) -> list:
+    """The run's Channel objects in the FRF's response order."""
+    by_name = {ch.name: ch for ch in run.channels}
+    return [by_name[name] for name in frf.channels]
+
+
+# the excitation axis that drives each mode best (the paper: vertical run, lateral run)
+_PREFERRED_AXIS = {"vertical": 1, "pitch": 1, "roll_low": 0, "yaw": 0}
+
+
+def _select(all_modes: list[IdentifiedMode], model, warnings: list, run_axes: dict | None = None):
+    """One estimate per label; the others are extra or duplicates.
+
+    A label is taken from a run hit along the axis that drives it (vertical
+    and pitch: a vertical run; roll_low and yaw: a lateral run) when such a
+    run shows it, and among those from the estimate with the smallest relative
+    frequency uncertainty.
+    """
+    chosen: dict[str, IdentifiedMode] = {}
+    extras: list[IdentifiedMode] = []
+    run_axes = run_axes or {}
+
+    def quality(m):
+        axis = _PREFERRED_AXIS.get(m.label)
+        off_axis = axis is not None and run_axes.get(m.run) is not None and run_axes[m.run] != axis
+        return (off_axis, (m.frequency_std_hz or 0.01 * m.frequency_hz) / m.frequency_hz)
+
+    for m in all_modes:
+        if m.label == "extra":
+            extras.append(m)
+            continue
+        if m.label not in chosen or quality(m) < quality(chosen[m.label]):
+            chosen[m.label] = m
+    # the same physical mode seen in several runs is not an extra mode
+    known = [m.frequency_hz for m in chosen.values()]
+    unique_extras: list[IdentifiedMode] = []
+    for m in sorted(extras, key=quality):
+        near = [f for f in known + [e.frequency_hz for e in unique_extras] if abs(f / m.frequency_hz - 1) < 0.01]
+        if not near:
+            unique_extras.append(m)
+    for m in unique_extras:
+        warnings.append(f"run '{m.run}': a mode at {m.frequency_hz:.1f} Hz that the model does not predict "
+                        f"(not paired with any carriage mode of the model)")
+    missing = [lab for lab in model.labels if lab not in chosen and not lab.startswith("support")]
+    for lab in missing:
+        warnings.append(f"model mode '{lab}' ({model.frequency_hz(lab):.0f} Hz) not observed in any run")
+    modes = sorted(chosen.values(), key=lambda m: m.frequency_hz)
+    return modes, sorted(unique_extras, key=lambda m: m.frequency_hz), missing
+
+
+def _quality_warnings(modes, settings, warnings: list) -> None:
+    for m in modes:
+        if m.label not in JOINT_LABELS.values():
+            continue
+        if m.coherence < settings.min_coherence:
+            warnings.append(f"mode {m.label} at {m.frequency_hz:.1f} Hz: coherence {m.coherence:.3f} at the peak "
+                            f"is below {settings.min_coherence}")
+        hp = m.half_power
+        if hp is None:
+            warnings.append(f"mode {m.label}: half-power points not found inside the band")
+        elif hp["bins_in_band"] < 3:
+            warnings.append(f"mode {m.label}: half-power band spans only {hp['bins_in_band']} bins; "
+                            f"the curve-fit damping is the one to trust")
+
+
+MAX_FORCE_DROP_DB = 20.0  # hammer practice: use the band where the force spectrum is within 20 dB of its peak
+
+
+def _excitation_warnings(modes, frf_by_run: dict, warnings: list) -> None:
+    """Warn when a joint mode lies where the hammer barely excites (e.g. a soft tip's spectral notch)."""
+    for m in modes:
+        frf = frf_by_run.get(m.run)
+        sff = (getattr(frf, "group_sums", None) or {}).get("Sff")
+        if m.label not in JOINT_LABELS.values() or sff is None:
+            continue
+        sff = np.sum(np.asarray(sff, dtype=float), axis=0)
+        freq = np.asarray(frf.frequency_hz)
+        peak = float(np.max(sff[freq > 0], initial=0.0))
+        here = float(sff[int(np.argmin(np.abs(freq - m.frequency_hz)))])
+        if peak > 0 and here < peak * 10 ** (-MAX_FORCE_DROP_DB / 10):
+            drop = "no" if here <= 0 else f"{-10 * np.log10(here / peak):.0f} dB less"
+            warnings.append(f"mode {m.label} at {m.frequency_hz:.1f} Hz: the hammer puts {drop} force there than at "
+                            f"its spectral peak (limit {MAX_FORCE_DROP_DB:.0f} dB; a harder tip helps); the frequency "
+                            "and damping may be off by more than their std")
