@@ -406,6 +406,9 @@ def identify_cmd(files, guide_name, estimator, as_json, csv_path, summary_path, 
                 click.echo(f"guidefit: identification rejected: {path}: {result.gate}", err=True)
                 _echo_details(result.warnings, verbose)
                 code = max(code, 1)
+            for line in result.unidentified:  # a joint parameter the set-up should give is missing
+                click.echo(f"guidefit: identification incomplete: {path}: {line}", err=True)
+                code = max(code, 1)
             if plot_path:
                 with _written(plot_targets[path]) as tmp:
                     report.plot_identification(result, tmp)
@@ -424,6 +427,7 @@ def identify_cmd(files, guide_name, estimator, as_json, csv_path, summary_path, 
             click.echo(report.dump_json(data))
         worst = max(worst, code)
         gated = [f"identification rejected: {result.gate}"] if result is not None and result.gate else []
+        gated += [f"identification incomplete: {line}" for line in (result.unidentified if result else ())]
         outcomes.append((str(path), violations + gated, error))
     for target in filter(None, {csv_path, summary_path}):
         with _written(target) as tmp:

@@ -166,6 +166,9 @@ class Identification:
     modal: object = field(default=None, repr=False, compare=False)  # guidefit.modal_stage.ModalResult
     gate: str | None = None  # why the modes are not those of a carriage on this guide (no joint parameters)
     sensor_faults: tuple = ()  # guidefit.consistency.SensorFault of channels that do not fit rigid motion
+    #: why a joint parameter the set-up should have given is missing (its mode excited and seen, yet not found
+    #: or not told apart): the identification is incomplete (exit 1), the parameters found are still given
+    unidentified: tuple = ()
 
     def hit_rows(self) -> list[dict]:
         """Every hit of every run, accepted or rejected, including runs that gave no FRF."""
@@ -192,6 +195,7 @@ class Identification:
             "run_modes": self.run_modes(),
             "method": "global_fit" if self.modal is not None else "per_run",
             "gate": self.gate,
+            "unidentified": list(self.unidentified),
             "sensor_faults": [{"channel": f.channel, "kind": f.kind, "factor": f.factor, "axis": f.axis,
                                "alternatives": list(f.alternatives), "message": f.message}
                               for f in self.sensor_faults],
@@ -457,9 +461,27 @@ def _identify_global(path, source, guide, model, settings) -> Identification:
     if gate is not None:
         gate += frame_hint(recording)
         params = joint_parameters(guide.mass_kg, {})
+    unidentified = () if gate is not None else _unidentified(joint, model, check.sets, [*modes, *res.extras])
     return Identification(str(path), guide, tuple(runs), tuple(modes), params, tuple(warnings),
                           tuple(res.extras), tuple(res.missing), tuple(failed_rows), hits_checked=not from_frfs,
-                          modal=res, gate=gate, sensor_faults=check.faults)
+                          modal=res, gate=gate, sensor_faults=check.faults, unidentified=unidentified)
+
+
+def _unidentified(joint: dict, model, sets, modes) -> tuple:  # modes: the named ones and the extras
+    """One sentence per joint parameter pair (f_V..c_V, f_H..c_H) left out although the set-up excites and
+    sees its mode (:func:`guidefit.consistency.observable_modes`): not found, or found and not told apart
+    (``ambiguous``). A layout that cannot see the mode is not a failure (the result says what it cannot tell)."""
+    from guidefit import consistency
+
+    observable = consistency.observable_modes(model, sets)
+    ambiguous = any(getattr(m, "label", None) == "ambiguous" for m in modes)
+    out = []
+    for key, label in JOINT_LABELS.items():
+        if joint.get(key) is None and label in observable:
+            why = "found but not told apart from another mode" if ambiguous else "not found"
+            out.append(f"f_{key}, K_{key}, c_{key} not identified: the {label} mode this set-up excites and sees "
+                       f"was {why} (the warnings say why)")
+    return tuple(out)
 
 
 #: runs of one hit point and direction whose mean peak forces differ by this factor are force levels

@@ -151,3 +151,31 @@ def test_a_structure_that_is_not_a_carriage_is_refused(tmp_path):
     result = identify(path, settings=FAST)
     assert result.gate is not None
     assert all(p["value"] is None for p in result.parameters.values())
+
+
+def test_a_joint_mode_the_set_up_sees_but_cannot_name_is_an_incomplete_identification(tmp_path):
+    """A heavy base on the one-axis layout: the roll pair cannot be told apart (honestly ``ambiguous``),
+    so f_H, K_H, c_H are missing although the layout excites and sees the mode. That was exit 0 with
+    null numbers; it is now exit 1 with one line saying which parameters and why, the rest still given."""
+    import json
+
+    from click.testing import CliRunner
+
+    from guidefit.cli import main
+
+    data, _ = simulate("MRB35", effects=["base_mode:mass_kg=3,lateral_n_per_m=3e8,vertical_n_per_m=1e9"],
+                       config=SimulationConfig(hits=4, record_s=0.05, sensor_layout="default"), seed=1)
+    path = tmp_path / "heavy_base.h5"
+    write_recording(path, data)
+    result = CliRunner().invoke(main, ["identify", str(path), "--json", "--no-jackknife"])
+    out = json.loads(result.stdout.strip().splitlines()[-1])
+    assert out["parameters"]["K_H"]["value"] is None and out["parameters"]["K_V"]["value"] is not None
+    assert result.exit_code == 1, result.output
+    (line,) = out["unidentified"]
+    assert line.startswith("f_H, K_H, c_H not identified: the roll_low mode") and "not told apart" in line
+    assert "guidefit: identification incomplete:" in result.stderr
+
+
+def test_a_complete_identification_is_not_incomplete(one_axis):
+    _, _, clean, _ = one_axis
+    assert clean.unidentified == () and clean.to_dict()["unidentified"] == []
