@@ -479,6 +479,36 @@ def _candidate(gf, k, sensors, drive, mass) -> dict:
             "energy": energy_shares(qn, mass), "constants": constants, "primary": primary}
 
 
+def _scale_warnings(ev, mass_kg: float) -> list[str]:
+    """What the labeller's scales say (:class:`guidefit.labels.Evidence`): the whole recording, or one
+    run against the others, off by a unit factor or reversed in sign. K and c do not depend on either."""
+    from guidefit.consistency import scale_factor_hint
+    from guidefit.labels import COMMON_SCALE_FACTOR
+
+    reversed_ = "the excitation_direction, or every accelerometer's direction, is reversed"
+    out = []
+    common = ev.common_scale
+    if common < 0:
+        unit = f"; and {scale_factor_hint(1 / -common)}" if common != -1.0 else ""
+        out.append(f"every mode is in antiphase with the model at the hit point (modal constants {common:.3g} "
+                   f"times those the model predicts): {reversed_}{unit}; labels were made at the recording's "
+                   "own scale and sign")
+    elif common != 1.0:
+        # constants s times the model's: the data of a body 1/s times the carriage's mass (1000: a prefix, 9.81: g)
+        out.append(f"the modal constants are {common:.3g} times those the model predicts for a carriage of "
+                   f"{mass_kg:.3g} kg at these sensors ({scale_factor_hint(1 / common)}; labels were made at "
+                   "the recording's own scale)")
+    for run, factor in ev.run_factors.items():
+        parts = [f"its modal constants are {factor:.3g} times the other runs', every mode alike"]
+        if factor < 0:
+            parts.append(f"every mode in antiphase with theirs: in this run {reversed_}")
+        if not 1 / COMMON_SCALE_FACTOR <= abs(factor) <= COMMON_SCALE_FACTOR:
+            parts.append(f"{scale_factor_hint(1 / abs(factor))}, in this run's force or accelerometer calibration")
+        out.append(f"run '{run}': {'; '.join(parts)}; labels were made with each run at its own scale and sign; "
+                   "K and c do not depend on it")
+    return out
+
+
 def _labelled(gf, candidates, per_run, frf_by_run, geometry, model, warnings, band, mass_kg) -> ModalResult:
     from guidefit import labels as lab_mod
     from guidefit import modeshapes as ident
@@ -489,29 +519,7 @@ def _labelled(gf, candidates, per_run, frf_by_run, geometry, model, warnings, ba
     predicted = lab_mod.predicted_constants(model, views)
     ev = lab_mod.evidence(measured, views, model, predicted)
     decided = lab_mod.label_modes(measured, views, model, predicted, ev)
-    from guidefit.consistency import scale_factor_hint
-
-    reversed_ = ("the excitation_direction, or every accelerometer's direction, is reversed")
-    if ev.common_scale < 0:
-        size = abs(ev.common_scale)
-        warnings.append("every mode is in antiphase with the model at the hit point (modal constants "
-                        f"{ev.common_scale:.3g} times those the model predicts): {reversed_}"
-                        + (f"; and {scale_factor_hint(1 / size)}" if size != 1.0 else "")
-                        + "; labels were made at the recording's own scale and sign")
-    elif ev.common_scale != 1.0:
-        # constants s times the model's: the data of a body 1/s times the carriage's mass (1000: a prefix, 9.81: g)
-        warnings.append(f"the modal constants are {ev.common_scale:.3g} times those the model predicts for a "
-                        f"carriage of {mass_kg:.3g} kg at these sensors ({scale_factor_hint(1 / ev.common_scale)}"
-                        "; labels were made at the recording's own scale)")
-    for run, factor in ev.run_factors.items():
-        size = abs(factor)
-        what = (f"every mode in antiphase with the other runs' (modal constants {factor:.3g} times theirs): in this "
-                f"run {reversed_}" if factor < 0 else
-                f"its modal constants are {factor:.3g} times the other runs' (every mode alike")
-        if size > lab_mod.COMMON_SCALE_FACTOR or size < 1 / lab_mod.COMMON_SCALE_FACTOR:
-            what += f"; {scale_factor_hint(1 / size)}, in this run's force or accelerometer calibration"
-        warnings.append(f"run '{run}': {what}{')' if factor > 0 else ''}; labels were made with each run at its own "
-                        "scale and sign; K and c do not depend on it")
+    warnings.extend(_scale_warnings(ev, mass_kg))
     visible = dict(zip(model.labels, lab_mod.visible_modes(predicted)))
     modes, extras = [], []
     for c, dec in zip(candidates, decided):
