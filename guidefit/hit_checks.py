@@ -220,25 +220,18 @@ def _assess_rows(columns, run: Run, s, pre: int | None, median_peak, force_base=
     return codes, reasons, peak, pre, metrics
 
 
-def _median(x: np.ndarray):
-    """``np.median(x)`` of a finite 1-D float64 array, the same value, usually faster.
+def _median(x: np.ndarray) -> np.float64:
+    """``np.median(x)`` of a finite 1-D float array (float32 as float64 arithmetic gives it), usually faster.
 
     The middle order statistics are bracketed between two values of a strided
     sample; counting the samples below and within the bracket (cheap vectorised
     passes) confirms the bracket, and only the samples inside it are
-    partitioned. Where the bracket misses, ``np.median`` itself is used.
+    partitioned. Where the bracket misses (and for short arrays) the whole
+    array is partitioned (:func:`_partition_median`).
     """
     n = x.size
-    if n < 8192 and x.dtype != np.float64:  # float32 rows: the median float64 arithmetic gives
-        return _median_exact(x)
     if n < 8192:
-        if n == 0:
-            return np.median(x)
-        k = n // 2
-        if n % 2:
-            return np.partition(x, k)[k]
-        part = np.partition(x, (k - 1, k))
-        return (part[k - 1] + part[k]) / 2  # as np.median: the mean of the middle two
+        return _partition_median(x)
     k = n // 2
     ranks = (k - 1, k) if n % 2 == 0 else (k,)
     sample = x[:: n // 4096]
@@ -248,19 +241,18 @@ def _median(x: np.ndarray):
     lo, hi = np.partition(sample, edges)[list(edges)]
     below = int(np.count_nonzero(x < lo))
     if below > ranks[0]:
-        return np.median(x) if x.dtype == np.float64 else _median_exact(x)
+        return _partition_median(x)
     band = x[(x >= lo) & (x <= hi)]
     if below + band.size <= ranks[-1] or band.size > n // 4:
-        return np.median(x) if x.dtype == np.float64 else _median_exact(x)
+        return _partition_median(x)
     kth = [r - below for r in ranks]
     part = np.partition(band, kth)
-    # as np.median: the mean of the middle one or two (in float64 for float32 rows)
-    return np.mean(part[kth[0] : kth[-1] + 1], dtype=np.float64)
+    return np.mean(part[kth[0] : kth[-1] + 1], dtype=np.float64)  # as np.median: the middle one or two
 
 
-def _median_exact(x: np.ndarray) -> np.float64:
-    """``np.median(x.astype(float64))`` of float32 samples without the float64 copy: the middle
-    order statistics are exact float32 values; only their mean needs float64."""
+def _partition_median(x: np.ndarray) -> np.float64:
+    """The median by one partition, as ``np.median`` computes it: the middle value, or the mean of the
+    middle two in float64 (exact order statistics of float32 samples, no float64 copy); NaN if empty."""
     n = x.size
     if n == 0:
         return np.float64(np.nan)
