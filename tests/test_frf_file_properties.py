@@ -14,7 +14,7 @@ import shutil
 import h5py
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from guidefit.errors import GuidefitError
@@ -25,7 +25,7 @@ RUN = "frf/vertical"
 ATTRIBUTES = {
     "sample_rate_hz": [0.0, -200_000.0, math.nan, math.inf, 5e-324, "fast", [200_000.0, 1.0]],
     "exp_window_tau_s": [0.0, -0.01, math.inf, "x", [0.01, 0.02]],
-    "force_window_s": [0.0, -1e-3, math.nan, math.inf, "x"],
+    "force_window_s": [0.0, -1e-3, math.nan, math.inf, "x", [1e-3, 2e-3]],
     "estimator": ["H3", "", "h1", 1.0],
     "excitation_direction": [[0.0, 0.0, 0.0], [math.nan, -1.0, 0.0], [0.0, -1.0], [0.0, -2.0, 0.0], "down"],
     "excitation_position_m": [[math.nan, 0.0, 0.0], [0.0, 0.0], [math.inf, 0.0, 0.0]],
@@ -102,6 +102,8 @@ def _mutate_dataset(group, name: str, how: str) -> None:
 @settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(attrs=st.dictionaries(st.sampled_from(sorted(ATTRIBUTES)), st.integers(0, 6), max_size=2),
        sets=st.lists(st.sampled_from(DATASETS), max_size=2, unique=True))
+@example(attrs={"exp_window_tau_s": 4}, sets=[])  # two numbers where one belongs: the first was used
+@example(attrs={"estimator": 0}, sets=[])  # 'H3' was accepted
 def test_frf_file_is_read_as_written_or_refused_in_one_line(frf_file, tmp_path_factory, attrs, sets):
     from guidefit.io.frf_files import read_frf_file
 
@@ -138,9 +140,11 @@ def test_frf_file_is_read_as_written_or_refused_in_one_line(frf_file, tmp_path_f
     assert np.all(np.isfinite(frf.coherence)) and np.all((frf.coherence >= 0) & (frf.coherence <= 1 + 1e-12))
     assert len(set(frf.channels)) == len(frf.channels) == H.shape[1]
     assert frf.estimator in ("H1", "H2", "Hv")
-    tau = float(stored["exp_window_tau_s"])
-    assert (math.isnan(tau) and frf.exp_window_tau_s is None) or frf.exp_window_tau_s == pytest.approx(tau) \
-        or (math.isnan(tau) and math.isnan(frf.exp_window_tau_s or math.nan))
+    for key in ("exp_window_tau_s", "force_window_s"):  # a single number (NaN: none), read as written
+        written = np.asarray(stored[key], float)
+        assert written.size == 1, (key, written)
+        expected = None if math.isnan(written.item()) else written.item()
+        assert getattr(frf, key) == (None if expected is None else pytest.approx(expected)), key
     run = next(r for r in got.recording.runs if r.name == "vertical")
     assert run.sample_rate_hz > 0 and math.isfinite(run.sample_rate_hz)
     d = np.asarray(run.excitation_direction, float)

@@ -433,9 +433,12 @@ def _optional_float(attrs, key: str, where: str = "") -> float | None:
     """A number attribute, None when absent or NaN (what the writer stores for "none")."""
     if key not in attrs:
         return None
+    value = np.asarray(attrs[key])
     try:
-        v = float(np.asarray(attrs[key]).reshape(-1)[0])
-    except (TypeError, ValueError, IndexError):
+        if value.size != 1:
+            raise ValueError
+        v = float(value.reshape(-1)[0])
+    except (TypeError, ValueError):  # text, or several numbers where one belongs: never the first of them
         raise RecordingError(f"{where or 'frf file'}: attribute '{key}' is not a number") from None
     return None if math.isnan(v) else v
 

@@ -692,7 +692,7 @@ def write_hdf5(path, recording, *, compression: str | None = None) -> None:
             f"recording: expected RecordingData, RunData or Recording, got {type(recording).__name__}"
         )
     for run in recording.runs:
-        if getattr(run, "hit_position_m", ()) is None:  # a Run read from a file that does not say where
+        if isinstance(run, Run) and run.hit_position_m is None:  # read from a file that does not say where
             raise RecordingError(
                 f"{display}: run '{run.name}': the hit point is unknown (the source file gives no coordinates "
                 "for the reference node); a recording would put it at the force channel's position. Give it: "
