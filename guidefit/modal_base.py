@@ -74,6 +74,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from guidefit.fitcore import RESIDUAL_TERMS
 from guidefit.prominence import prominent_peaks
 
 __all__ = [
@@ -93,14 +94,6 @@ __all__ = [
 
 _KINDS = ("accelerance", "mobility", "receptance")
 _PEAK_INTERPOLATIONS = ("inverse_square", "log", "linear")
-#: residual terms of the fitted accelerance; each enters with one real coefficient per channel
-_RESIDUAL_TERMS = {
-    "lower": lambda s: np.ones_like(s),  # L_r: mass line of the modes below the band
-    "lower_damping": lambda s: 1.0 / s,  # L1_r / (jw): their damping tail
-    "upper": lambda s: s * s,  # U_r (jw)^2: compliance of the modes above the band
-    "upper_damping": lambda s: s**3,  # U1_r (jw)^3: their damping
-}
-_DEFAULT_RESIDUALS = ("lower", "lower_damping", "upper")
 
 
 class HalfPowerWarning(UserWarning):
@@ -479,8 +472,8 @@ def synthesize(frequency_hz, modes: Sequence[Mode], residuals: dict | None = Non
     if not modes and not residuals:
         raise ValueError("synthesize needs at least one mode or residual term")
     for name in residuals:
-        if name not in _RESIDUAL_TERMS:
-            raise ValueError(f"residuals keys must be in {tuple(_RESIDUAL_TERMS)}, got {name!r}")
+        if name not in RESIDUAL_TERMS:
+            raise ValueError(f"residuals keys must be in {tuple(RESIDUAL_TERMS)}, got {name!r}")
     if modes:
         R = np.asarray(modes[0].residues).size
     else:
@@ -497,7 +490,7 @@ def synthesize(frequency_hz, modes: Sequence[Mode], residuals: dict | None = Non
         c = np.asarray(c, dtype=float).reshape(-1)
         if c.size != R:
             raise ValueError(f"residuals[{name!r}] has {c.size} channels, expected {R}")
-        H += _RESIDUAL_TERMS[name](s) * c[None, :]
+        H += RESIDUAL_TERMS[name](s) * c[None, :]
     return H
 
 
