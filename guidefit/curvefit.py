@@ -257,6 +257,47 @@ def _initial_from(initial, n_modes):
     return 2 * np.pi * np.array(fn), np.array(z)
 
 
+def _band_arguments(f, Hf, band_hz, n_modes, residuals, weights):
+    """:func:`fit_band`'s arguments checked: ``(lo, hi, sel, terms, n_bins, W)`` with the band's
+    bins ``sel``, the residual terms, the bin count and the weights in the band (or ``None``).
+
+    Raises ``ValueError`` naming the argument for a malformed band, mode count, residual term or
+    weights, or a band with too few bins for ``n_modes``.
+    """
+    try:
+        lo, hi = (float(b) for b in band_hz)
+    except (TypeError, ValueError):
+        raise ValueError(f"band_hz must be (f_lo, f_hi) in Hz, got {band_hz!r}") from None
+    sel = _band_mask(f, lo, hi, "band_hz")
+    if not isinstance(n_modes, (int, np.integer)) or n_modes < 1:
+        raise ValueError(f"n_modes must be an integer >= 1, got {n_modes!r}")
+    terms = (residuals,) if isinstance(residuals, str) else tuple(residuals)
+    for term in terms:
+        if term not in fitcore.RESIDUAL_TERMS:
+            raise ValueError(f"residuals entries must be in {tuple(fitcore.RESIDUAL_TERMS)}, got {term!r}")
+    if len(set(terms)) != len(terms):
+        raise ValueError(f"residuals has repeated entries: {terms}")
+    n_bins = int(sel.sum())
+    n_lin = 2 * n_modes + len(terms)
+    need = n_lin + n_modes + 2
+    if n_bins < need:
+        raise ValueError(
+            f"band_hz={band_hz} holds {n_bins} bins; {n_modes} modes need at least {need}"
+        )
+    W = None
+    if weights is not None:
+        W = np.asarray(weights, dtype=float)
+        if W.shape == (f.size,):
+            W = np.repeat(W[:, None], Hf.shape[1], axis=1)
+        if W.shape != Hf.shape or not np.all(np.isfinite(W)) or np.any(W < 0):
+            raise ValueError(
+                f"weights must be finite, >= 0 and of shape ({f.size},) or {Hf.shape}, "
+                f"got shape {np.shape(weights)}"
+            )
+        W = W[sel]
+    return lo, hi, sel, terms, n_bins, W
+
+
 def fit_band(
     frequency_hz,
     H,
@@ -293,37 +334,7 @@ def fit_band(
     """
     f = _as_frequency(frequency_hz)
     Hf = _as_frf(f, H)
-    try:
-        lo, hi = (float(b) for b in band_hz)
-    except (TypeError, ValueError):
-        raise ValueError(f"band_hz must be (f_lo, f_hi) in Hz, got {band_hz!r}") from None
-    sel = _band_mask(f, lo, hi, "band_hz")
-    if not isinstance(n_modes, (int, np.integer)) or n_modes < 1:
-        raise ValueError(f"n_modes must be an integer >= 1, got {n_modes!r}")
-    terms = (residuals,) if isinstance(residuals, str) else tuple(residuals)
-    for term in terms:
-        if term not in fitcore.RESIDUAL_TERMS:
-            raise ValueError(f"residuals entries must be in {tuple(fitcore.RESIDUAL_TERMS)}, got {term!r}")
-    if len(set(terms)) != len(terms):
-        raise ValueError(f"residuals has repeated entries: {terms}")
-    n_bins = int(sel.sum())
-    n_lin = 2 * n_modes + len(terms)
-    need = n_lin + n_modes + 2
-    if n_bins < need:
-        raise ValueError(
-            f"band_hz={band_hz} holds {n_bins} bins; {n_modes} modes need at least {need}"
-        )
-    W = None
-    if weights is not None:
-        W = np.asarray(weights, dtype=float)
-        if W.shape == (f.size,):
-            W = np.repeat(W[:, None], Hf.shape[1], axis=1)
-        if W.shape != Hf.shape or not np.all(np.isfinite(W)) or np.any(W < 0):
-            raise ValueError(
-                f"weights must be finite, >= 0 and of shape ({f.size},) or {Hf.shape}, "
-                f"got shape {np.shape(weights)}"
-            )
-        W = W[sel]
+    lo, hi, sel, terms, n_bins, W = _band_arguments(f, Hf, band_hz, n_modes, residuals, weights)
     fb, Hb = f[sel], Hf[sel]
     prob = _Problem(fb, Hb, W, terms)
     if not np.any(prob.Y):
@@ -375,6 +386,7 @@ def fit_modes(
     max_nfev: int = 200,
     uncertainty: bool = True,
 ) -> list[Mode]:
+    # long because: its docstring is the method's description and the parameters' reference; the body is one call
     """Fit ``n_modes`` modes with global poles to all channels in a band.
 
     The model is the pole-residue accelerance of the module docstring,
@@ -560,6 +572,21 @@ def auto_fit(
             f"auto_fit: no peak with prominence >= {min_prominence_db} dB "
             f"between f_min={f_min} Hz and f_max={f_max} Hz"
         )
+    groups = _peak_groups(f, Hf, pk, band_factor)
+    lo_all, hi_all = max(f_min, f[0]), min(f_max, f[-1])
+    modes, groups_fitted = _fit_groups(f, Hf, groups, lo_all, hi_all, grow, fit_kwargs)
+    if not modes:
+        raise IdentificationError(
+            f"auto_fit: no mode could be fitted between f_min={f_min} Hz and f_max={f_max} Hz"
+        )
+    if refine and len(groups_fitted) > 1 and len(modes) <= _MAX_JOINT_MODES:
+        modes = _refit_jointly(f, Hf, modes, groups_fitted, fit_kwargs)
+    return sorted(modes, key=lambda m: m.frequency_hz)
+
+
+def _peak_groups(f, Hf, pk, band_factor) -> list[list[tuple]]:
+    """:func:`auto_fit`'s step 1: the peaks ``pk`` as ``(f_n, zeta, interval low, interval high)``
+    (half-power estimates on ``sqrt(MIF)``), sorted, in groups of overlapping intervals."""
     order = np.argsort(pk.frequency_hz)
     mag = np.sqrt(mode_indicator(f, Hf))
     items = []  # (f_n, zeta, interval low, interval high)
@@ -574,7 +601,15 @@ def auto_fit(
             groups[-1].append(it)
         else:
             groups.append([it])
-    lo_all, hi_all = max(f_min, f[0]), min(f_max, f[-1])
+    return groups
+
+
+def _fit_groups(f, Hf, groups, lo_all, hi_all, grow, fit_kwargs) -> tuple[list[Mode], list]:
+    """:func:`auto_fit`'s steps 2 and 3: each group fitted in its band (:func:`_fit_dropping`) and,
+    with ``grow``, given the modes it misses (:func:`_grow`) within its territory.
+
+    Returns the modes of all groups and ``(band, modes)`` of each group fitted.
+    """
     modes, groups_fitted = [], []
     for j, g in enumerate(groups):
         # the group's territory ends a half-power bandwidth short of the modes fitted
@@ -599,25 +634,26 @@ def auto_fit(
             fit = _grow(f, Hf, fit, (t_lo, t_hi), fit_kwargs) if grow else fit
             modes.extend(fit.modes)
             groups_fitted.append((fit.band_hz, fit.modes))
-    if not modes:
-        raise IdentificationError(
-            f"auto_fit: no mode could be fitted between f_min={f_min} Hz and f_max={f_max} Hz"
-        )
-    if refine and len(groups_fitted) > 1 and len(modes) <= _MAX_JOINT_MODES:
-        band = (groups_fitted[0][0][0], groups_fitted[-1][0][1])
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("error", ModeFitWarning)
-                joint = fit_band(f, Hf, band, len(modes), modes, **fit_kwargs).modes
-        except ModeFitWarning:
-            joint = None
-        # keep the joint fit only if no mode moved by more than half its bandwidth
-        if joint is not None and all(
-            abs(a.frequency_hz - b.frequency_hz) <= b.damping_ratio * b.frequency_hz
-            for a, b in zip(joint, sorted(modes, key=lambda m: m.frequency_hz))
-        ):
-            modes = joint
-    return sorted(modes, key=lambda m: m.frequency_hz)
+    return modes, groups_fitted
+
+
+def _refit_jointly(f, Hf, modes, groups_fitted, fit_kwargs) -> list[Mode]:
+    """:func:`auto_fit`'s step 4: all modes refitted over the union of the group bands; the joint
+    fit replaces ``modes`` unless a mode ends at a bound or moved by more than half its bandwidth."""
+    band = (groups_fitted[0][0][0], groups_fitted[-1][0][1])
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", ModeFitWarning)
+            joint = fit_band(f, Hf, band, len(modes), modes, **fit_kwargs).modes
+    except ModeFitWarning:
+        joint = None
+    # keep the joint fit only if no mode moved by more than half its bandwidth
+    if joint is not None and all(
+        abs(a.frequency_hz - b.frequency_hz) <= b.damping_ratio * b.frequency_hz
+        for a, b in zip(joint, sorted(modes, key=lambda m: m.frequency_hz))
+    ):
+        return joint
+    return modes
 
 
 _MAX_JOINT_MODES = 12
