@@ -253,9 +253,11 @@ def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windo
     or a function of the record length giving how many of the first bins to sum
     (the FFT is whole either way; the bins above are not summed).
     """
-    early = _early_buffers(expect, precision, force_index, n_groups, workers, pair, n_bins)
     source = iter(items)
-    pulled = _pull_first(source, early, precision, force_index, n_groups, workers, pair, n_bins)
+    # the early buffers are passed on, not kept here: once the first records are in them, the future
+    # holding them must go, or it keeps the first records' memory alive
+    pulled = _pull_first(source, _early_buffers(expect, precision, force_index, n_groups, workers, pair, n_bins),
+                         precision, force_index, n_groups, workers, pair, n_bins)
     if pulled is None:
         return None
     space, first, acc, n_bufs, block = pulled
