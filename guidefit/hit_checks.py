@@ -3,7 +3,9 @@
 :func:`_assess_rows` runs the checks (``non_finite``, ``negative``, ``too_weak``,
 ``double_hit``, ``clipped``, ``dropout``, ``flat_end``, ``not_decayed``; see
 :mod:`guidefit.hits` for what each means) on the channel rows of one record,
-with its helpers (:func:`_double_hit`, :func:`_dropout`, :func:`_flat_end`,
+one helper per check giving its reason (:func:`_non_finite`, :func:`_too_weak`,
+:func:`_clipped`, :func:`_dropped_out`, :func:`_flat_ends`, :func:`_not_decayed`)
+on top of the detectors (:func:`_double_hit`, :func:`_dropout`, :func:`_flat_end`,
 :func:`_flat_top`, :func:`_median`...). They are kept apart from
 :mod:`guidefit.hits`, which finds the hits and reads them from the file, because
 they are pure functions of the samples (no file, no iteration state): they can
