@@ -1,7 +1,8 @@
-"""Modal curve fitting of one run's FRFs: variable projection of poles and residues in a band,
-the automatic per-run fit (:func:`auto_fit`), and the linear-algebra pieces the global fit reuses.
+"""Modal curve fitting of one run's FRFs: variable projection of poles and residues in a band
+(:func:`fit_band`, :func:`fit_modes`) and the automatic per-run fit (:func:`auto_fit`).
 
-Built on :mod:`guidefit.modal_base` (types, peak picking, :func:`guidefit.modal_base.synthesize`);
+Built on :mod:`guidefit.modal_base` (types, peak picking, :func:`guidefit.modal_base.synthesize`)
+and on :mod:`guidefit.fitcore` (the basis, least squares and derivative it shares with the global fit);
 every public name here is importable from :mod:`guidefit.modes` too.
 """
 
@@ -13,13 +14,12 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from guidefit import fitcore
 from guidefit.errors import IdentificationError
 from guidefit.halfpower import half_power, sdof_from_half_power
 
 __all__ = ["auto_fit", "fit_band", "fit_modes"]
 from guidefit.modal_base import (
-    _DEFAULT_RESIDUALS,
-    _RESIDUAL_TERMS,
     BandFit,
     HalfPowerWarning,
     Mode,
@@ -34,139 +34,6 @@ from guidefit.modal_base import (
 )
 
 
-def _poles(wn: np.ndarray, zeta: np.ndarray) -> np.ndarray:
-    return wn * (-zeta + 1j * np.sqrt(1.0 - zeta**2))
-
-
-def _basis(s: np.ndarray, poles: np.ndarray, terms: tuple) -> np.ndarray:
-    """(F, 2n + len(terms)) complex columns; real coefficients (Re A, Im A, ..., terms)."""
-    s2 = (s * s)[:, None]
-    poles = np.asarray(poles)
-    a = s2 / (s[:, None] - poles[None, :])
-    b = s2 / (s[:, None] - np.conj(poles)[None, :])
-    out = np.empty((s.size, 2 * poles.size + len(terms)), dtype=complex)
-    out[:, 0:2 * poles.size:2] = a + b  # the same element-wise operations as one column at a time
-    out[:, 1:2 * poles.size:2] = 1j * (a - b)
-    for j, t in enumerate(terms):
-        out[:, 2 * poles.size + j] = _RESIDUAL_TERMS[t](s)
-    return out
-
-
-def _stack(z: np.ndarray) -> np.ndarray:
-    return np.concatenate([z.real, z.imag], axis=0)
-
-
-def _ls_solver(A: np.ndarray):
-    """``V -> (A^T A)^-1 V`` by a Cholesky factor of the normal matrix, or ``None``.
-
-    ``None`` when ``A^T A`` is not numerically positive definite (rank-deficient
-    ``A``); callers then fall back to an SVD solve. The inverse of the factor
-    is formed once (these normal matrices are small, a few dozen columns, and
-    one solver serves many right-hand sides), so that each solve is two matrix
-    products. numpy.linalg, not scipy.linalg: importing scipy.linalg costs
-    50-80 ms, a tenth of an identify run, and its triangular solves are not
-    needed for matrices this size.
-    """
-    factor_inverse = _cholesky_inverse(A.T @ A)
-    if factor_inverse is None:
-        return None
-
-    def solve(V):
-        return factor_inverse.T @ (factor_inverse @ V)
-
-    return solve
-
-
-def _cholesky_inverse(N: np.ndarray) -> np.ndarray | None:
-    """``L^-1`` of the Cholesky factor ``N = L L^T`` of a symmetric matrix, or ``None`` when ``N``
-    is not numerically positive definite (or not finite)."""
-    try:
-        factor = np.linalg.cholesky(N)
-    except np.linalg.LinAlgError:
-        return None
-    inverse = np.linalg.solve(factor, np.eye(N.shape[0]))
-    return inverse if np.all(np.isfinite(inverse)) else None
-
-
-def _ls_fit(A: np.ndarray, Y: np.ndarray, solver=None):
-    """Least-squares fit of Y by the columns of A (unit-norm columns).
-
-    Normal equations with one step of iterative refinement: much cheaper
-    than a QR for tall, narrow A, and as accurate while cond(A)^2 eps << 1.
-    ``solver``: the :func:`_ls_solver` of ``A`` when the caller has it (the
-    same design fitted to other data).
-
-    Returns
-    -------
-    (E, B, solve)
-        Residual ``Y - A B``, coefficients ``B`` and the normal-matrix solver of
-        :func:`_ls_solver`; ``solve`` is ``None`` when A is rank deficient and the
-        fit fell back to an SVD solve.
-    """
-    solve = solver or _ls_solver(A)
-    if solve is not None:
-        B = solve(A.T @ Y)
-        B += solve(A.T @ (Y - A @ B))
-        if np.all(np.isfinite(B)):
-            return Y - A @ B, B, solve
-    B = np.linalg.lstsq(A, Y, rcond=None)[0]
-    return Y - A @ B, B, None
-
-
-def _ls_residual(A: np.ndarray, Y: np.ndarray) -> np.ndarray:
-    """Residual of the least-squares fit of Y by the columns of A (see :func:`_ls_fit`)."""
-    return _ls_fit(A, Y)[0]
-
-
-def _projected_jacobian(A, dA, pairs, E, B, solve) -> np.ndarray:
-    """Jacobian of the variable-projection residual ``E = (I - A A^+) Y``.
-
-    Golub and Pereyra's exact derivative for a design matrix whose parameter
-    ``j`` moves only the two columns ``pairs[j]``:
-    ``dE/dx_j = -(I - A A^+) dA_j B - A (A^T A)^-1 dA_j^T E``.
-
-    Parameters
-    ----------
-    A : (M, L) design matrix (weighted, unit-norm columns).
-    dA : (P, M, 2) derivatives of the two moved columns, scaled like A's columns.
-    pairs : (P, 2) int, the columns each parameter moves.
-    E, B : the fit's residual (M, R) and coefficients (L, R).
-    solve : the normal-matrix solver of :func:`_ls_solver`.
-
-    Returns
-    -------
-    numpy.ndarray, shape (M, R, P)
-    """
-    n_params = dA.shape[0]
-    L, R = B.shape
-    M = A.shape[0]
-    V = dA @ B[pairs]  # dA_j B, (P, M, R)
-    Z = np.zeros((n_params, L, R))
-    Z[np.arange(n_params)[:, None], pairs] = dA.transpose(0, 2, 1) @ E  # dA_j^T E
-    rhs = (A.T @ V) - Z  # (P, L, R)
-    coef = solve(rhs.transpose(1, 0, 2).reshape(L, -1))  # (L, P R)
-    dE = (A @ coef).reshape(M, n_params, R) - V.transpose(1, 0, 2)
-    dE = dE.transpose(0, 2, 1)
-    return dE
-
-
-def _pole_derivatives(s, wn, zeta):
-    """d(raw basis column pair)/dx of every pole parameter x = (ln w_n..., ln zeta...).
-
-    Returns complex (P, F, 2) with P = 2n: the derivatives of the columns
-    ``a + b`` and ``j (a - b)`` of :func:`_basis` (``a = s^2/(s - p)``,
-    ``b = s^2/(s - p*)``) with ``dp/d ln w_n = p`` and
-    ``dp/d ln zeta = zeta w_n (-1 - j zeta / sqrt(1 - zeta^2))``.
-    """
-    poles = _poles(wn, zeta)
-    dp = np.concatenate([poles, zeta * wn * (-1.0 - 1j * zeta / np.sqrt(1.0 - zeta**2))])
-    p = np.concatenate([poles, poles])
-    s2 = (s * s)[None, :]
-    da = s2 / (s[None, :] - p[:, None]) ** 2 * dp[:, None]
-    db = s2 / (s[None, :] - np.conj(p)[:, None]) ** 2 * np.conj(dp)[:, None]
-    return np.stack([da + db, 1j * (da - db)], axis=2)
-
-
 class _Problem:
     """Weighted, normalised band data of one fit (internal)."""
 
@@ -179,10 +46,10 @@ class _Problem:
         W = np.ones((f.size, H.shape[1])) if weights is None else weights
         self.W2 = np.concatenate([W, W], axis=0)  # (2F, R) for stacked rows
         self.common = bool(np.all(W == W[:, :1]))
-        self.Y = _stack(H * self.scale) * self.W2  # (2F, R)
+        self.Y = fitcore.stack(H * self.scale) * self.W2  # (2F, R)
 
     def _design(self, poles):
-        Phi = _stack(_basis(self.s, poles, self.terms))  # (2F, L)
+        Phi = fitcore.stack(fitcore.basis(self.s, poles, self.terms))  # (2F, L)
         norm = np.sqrt(np.sum(Phi**2, axis=0))
         norm[norm == 0] = 1.0
         return Phi / norm, norm
@@ -198,21 +65,21 @@ class _Problem:
         E = np.empty_like(self.Y)
         for g in self._groups():
             w = self.W2[:, g][:, :1]
-            E[:, g] = _ls_residual(Phi * w, self.Y[:, g])
+            E[:, g] = fitcore.ls_residual(Phi * w, self.Y[:, g])
         return E.ravel()
 
     def jacobian(self, wn, zeta) -> np.ndarray | None:
         """d residual / d (ln w_n, ln zeta), shape (2F R, 2n); ``None`` if rank deficient.
 
-        The exact variable-projection derivative (:func:`_projected_jacobian`):
+        The exact variable-projection derivative (:func:`guidefit.fitcore.projected_jacobian`):
         one factorisation per channel group instead of the 2n extra residual
         evaluations of finite differences. Column scaling does not change the
         projection, so the unit-norm design is used with its columns'
         derivatives divided by the same norms.
         """
-        Phi, norm = self._design(_poles(wn, zeta))
+        Phi, norm = self._design(fitcore.poles(wn, zeta))
         n = wn.size
-        dcols = _pole_derivatives(self.s, wn, zeta)  # (2n, F, 2) complex
+        dcols = fitcore.pole_derivatives(self.s, wn, zeta)  # (2n, F, 2) complex
         dPhi = np.concatenate([dcols.real, dcols.imag], axis=1)  # (2n, 2F, 2)
         k = np.concatenate([np.arange(n), np.arange(n)])
         pairs = np.stack([2 * k, 2 * k + 1], axis=1)
@@ -221,10 +88,10 @@ class _Problem:
         for g in self._groups():
             w = self.W2[:, g][:, :1]
             A = Phi * w
-            E, B, solve = _ls_fit(A, self.Y[:, g])
+            E, B, solve = fitcore.ls_fit(A, self.Y[:, g])
             if solve is None:
                 return None
-            J[:, g, :] = _projected_jacobian(A, dPhi * w[None], pairs, E, B, solve)
+            J[:, g, :] = fitcore.projected_jacobian(A, dPhi * w[None], pairs, E, B, solve)
         return J.reshape(-1, 2 * n)
 
     def coefficients(self, poles) -> np.ndarray:
@@ -236,17 +103,12 @@ class _Problem:
         return B / norm[:, None]
 
 
-def _unpack(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    n = x.size // 2
-    return np.exp(x[:n]), np.exp(x[n:])
-
-
 def _covariance(prob: _Problem, wn, zeta, B) -> tuple[np.ndarray, np.ndarray]:
     """Std of (wn, zeta) per mode from the full Jacobian of the weighted residual."""
     n, R = wn.size, B.shape[1]
     s = prob.s
-    poles = _poles(wn, zeta)
-    Phi = _stack(_basis(s, poles, prob.terms))  # (2F, L)
+    poles = fitcore.poles(wn, zeta)
+    Phi = fitcore.stack(fitcore.basis(s, poles, prob.terms))  # (2F, L)
     L = Phi.shape[1]
     rows = 2 * s.size
     J = np.zeros((rows * R, 2 * n + R * L))
@@ -263,8 +125,8 @@ def _covariance(prob: _Problem, wn, zeta, B) -> tuple[np.ndarray, np.ndarray]:
             dB = s * s * np.conj(A) / (s - np.conj(p)) ** 2
             dp_dwn = p / wn[k]
             dp_dz = wn[k] * (-1.0 - 1j * zeta[k] / math.sqrt(1.0 - zeta[k] ** 2))
-            J[sl, k] = w * _stack(dA * dp_dwn + dB * np.conj(dp_dwn))
-            J[sl, n + k] = w * _stack(dA * dp_dz + dB * np.conj(dp_dz))
+            J[sl, k] = w * fitcore.stack(dA * dp_dwn + dB * np.conj(dp_dwn))
+            J[sl, n + k] = w * fitcore.stack(dA * dp_dz + dB * np.conj(dp_dz))
     dof = J.shape[0] - J.shape[1]
     if dof <= 0:
         return np.full(n, np.nan), np.full(n, np.nan)
@@ -282,7 +144,7 @@ def _solve(prob: _Problem, wn0, z0, bounds_wn, max_nfev):
     """Variable-projection least squares from initial (wn, zeta); returns (wn, zeta, cost)."""
     import scipy.optimize
 
-    zlo, zhi = 1e-5, 0.7
+    zlo, zhi = fitcore.ZETA_BOUNDS
     x0 = np.concatenate([np.log(np.clip(wn0, *bounds_wn)), np.log(np.clip(z0, zlo, zhi))])
     n = wn0.size
     lo = np.concatenate([np.full(n, math.log(bounds_wn[0])), np.full(n, math.log(zlo))])
@@ -290,11 +152,11 @@ def _solve(prob: _Problem, wn0, z0, bounds_wn, max_nfev):
     x0 = np.clip(x0, lo + 1e-12, hi - 1e-12)
 
     def fun(x):
-        wn, z = _unpack(x)
-        return prob.residual(_poles(wn, z))
+        wn, z = fitcore.unpack(x)
+        return prob.residual(fitcore.poles(wn, z))
 
     def jac(x):
-        J = prob.jacobian(*_unpack(x))
+        J = prob.jacobian(*fitcore.unpack(x))
         if J is not None:
             return J
         # Rank-deficient design: forward differences, as least_squares' "2-point".
@@ -314,7 +176,7 @@ def _solve(prob: _Problem, wn0, z0, bounds_wn, max_nfev):
         ftol=1e-12,
         gtol=1e-12,
     )
-    wn, z = _unpack(res.x)
+    wn, z = fitcore.unpack(res.x)
     return wn, z, float(np.sum(res.fun**2))
 
 
@@ -344,12 +206,6 @@ def _sdof_guess(f, mag, i, fp) -> tuple[float, float, bool]:
         return fp, 0.03, False
 
 
-def _suspicious(mode: Mode, lo: float, hi: float) -> bool:
-    """Fitted mode outside the band or at a damping bound of :func:`_solve`."""
-    z = mode.damping_ratio
-    return not lo <= mode.frequency_hz <= hi or z > 0.69 or z < 2e-5
-
-
 def _initial(prob: _Problem, H, n_modes, bounds_wn, max_nfev):
     """Initial poles: peaks of the band, then greedy additions at residual peaks."""
     f = prob.f
@@ -362,8 +218,8 @@ def _initial(prob: _Problem, H, n_modes, bounds_wn, max_nfev):
     z = np.array([g[1] for g in guesses])
     while wn.size < n_modes:
         wn, z, _ = _solve(prob, wn, z, bounds_wn, max_nfev)
-        B = prob.coefficients(_poles(wn, z))
-        model = _basis(prob.s, _poles(wn, z), prob.terms) @ B
+        B = prob.coefficients(fitcore.poles(wn, z))
+        model = fitcore.basis(prob.s, fitcore.poles(wn, z), prob.terms) @ B
         E = H * prob.scale - model
         cand = _peak_guesses(f, E, 3, min_prominence_db=0.5, min_snr_db=None)
         i = int(np.argmax(mode_indicator(f, E)))
@@ -401,6 +257,47 @@ def _initial_from(initial, n_modes):
     return 2 * np.pi * np.array(fn), np.array(z)
 
 
+def _band_arguments(f, Hf, band_hz, n_modes, residuals, weights):
+    """:func:`fit_band`'s arguments checked: ``(lo, hi, sel, terms, n_bins, W)`` with the band's
+    bins ``sel``, the residual terms, the bin count and the weights in the band (or ``None``).
+
+    Raises ``ValueError`` naming the argument for a malformed band, mode count, residual term or
+    weights, or a band with too few bins for ``n_modes``.
+    """
+    try:
+        lo, hi = (float(b) for b in band_hz)
+    except (TypeError, ValueError):
+        raise ValueError(f"band_hz must be (f_lo, f_hi) in Hz, got {band_hz!r}") from None
+    sel = _band_mask(f, lo, hi, "band_hz")
+    if not isinstance(n_modes, (int, np.integer)) or n_modes < 1:
+        raise ValueError(f"n_modes must be an integer >= 1, got {n_modes!r}")
+    terms = (residuals,) if isinstance(residuals, str) else tuple(residuals)
+    for term in terms:
+        if term not in fitcore.RESIDUAL_TERMS:
+            raise ValueError(f"residuals entries must be in {tuple(fitcore.RESIDUAL_TERMS)}, got {term!r}")
+    if len(set(terms)) != len(terms):
+        raise ValueError(f"residuals has repeated entries: {terms}")
+    n_bins = int(sel.sum())
+    n_lin = 2 * n_modes + len(terms)
+    need = n_lin + n_modes + 2
+    if n_bins < need:
+        raise ValueError(
+            f"band_hz={band_hz} holds {n_bins} bins; {n_modes} modes need at least {need}"
+        )
+    W = None
+    if weights is not None:
+        W = np.asarray(weights, dtype=float)
+        if W.shape == (f.size,):
+            W = np.repeat(W[:, None], Hf.shape[1], axis=1)
+        if W.shape != Hf.shape or not np.all(np.isfinite(W)) or np.any(W < 0):
+            raise ValueError(
+                f"weights must be finite, >= 0 and of shape ({f.size},) or {Hf.shape}, "
+                f"got shape {np.shape(weights)}"
+            )
+        W = W[sel]
+    return lo, hi, sel, terms, n_bins, W
+
+
 def fit_band(
     frequency_hz,
     H,
@@ -408,7 +305,7 @@ def fit_band(
     n_modes: int,
     initial: Sequence | None = None,
     *,
-    residuals: Sequence[str] = _DEFAULT_RESIDUALS,
+    residuals: Sequence[str] = fitcore.DEFAULT_RESIDUALS,
     weights=None,
     max_nfev: int = 200,
     uncertainty: bool = True,
@@ -437,37 +334,7 @@ def fit_band(
     """
     f = _as_frequency(frequency_hz)
     Hf = _as_frf(f, H)
-    try:
-        lo, hi = (float(b) for b in band_hz)
-    except (TypeError, ValueError):
-        raise ValueError(f"band_hz must be (f_lo, f_hi) in Hz, got {band_hz!r}") from None
-    sel = _band_mask(f, lo, hi, "band_hz")
-    if not isinstance(n_modes, (int, np.integer)) or n_modes < 1:
-        raise ValueError(f"n_modes must be an integer >= 1, got {n_modes!r}")
-    terms = (residuals,) if isinstance(residuals, str) else tuple(residuals)
-    for term in terms:
-        if term not in _RESIDUAL_TERMS:
-            raise ValueError(f"residuals entries must be in {tuple(_RESIDUAL_TERMS)}, got {term!r}")
-    if len(set(terms)) != len(terms):
-        raise ValueError(f"residuals has repeated entries: {terms}")
-    n_bins = int(sel.sum())
-    n_lin = 2 * n_modes + len(terms)
-    need = n_lin + n_modes + 2
-    if n_bins < need:
-        raise ValueError(
-            f"band_hz={band_hz} holds {n_bins} bins; {n_modes} modes need at least {need}"
-        )
-    W = None
-    if weights is not None:
-        W = np.asarray(weights, dtype=float)
-        if W.shape == (f.size,):
-            W = np.repeat(W[:, None], Hf.shape[1], axis=1)
-        if W.shape != Hf.shape or not np.all(np.isfinite(W)) or np.any(W < 0):
-            raise ValueError(
-                f"weights must be finite, >= 0 and of shape ({f.size},) or {Hf.shape}, "
-                f"got shape {np.shape(weights)}"
-            )
-        W = W[sel]
+    lo, hi, sel, terms, n_bins, W = _band_arguments(f, Hf, band_hz, n_modes, residuals, weights)
     fb, Hb = f[sel], Hf[sel]
     prob = _Problem(fb, Hb, W, terms)
     if not np.any(prob.Y):
@@ -480,7 +347,7 @@ def fit_band(
     wn, z, cost = _solve(prob, wn0, z0, bounds_wn, max_nfev)
     order = np.argsort(wn)
     wn, z = wn[order], z[order]
-    poles = _poles(wn, z)
+    poles = fitcore.poles(wn, z)
     B = prob.coefficients(poles)  # for unit-RMS channels
     if uncertainty:
         std_wn, std_z = _covariance(prob, wn, z, B)
@@ -494,7 +361,7 @@ def fit_band(
         mode = Mode(
             fk, float(z[k]), A, "curve_fit", float(std_wn[k] / (2 * np.pi)), float(std_z[k])
         )
-        if _suspicious(mode, fb[0], fb[-1]):
+        if fitcore.suspicious(mode, fb[0], fb[-1]):
             warnings.warn(
                 f"fit_band: mode {k} at {fk:.1f} Hz, zeta={z[k]:.3g} is outside "
                 f"band_hz={band_hz} or at a damping bound; n_modes={n_modes} may be too many",
@@ -514,11 +381,12 @@ def fit_modes(
     n_modes: int,
     initial: Sequence | None = None,
     *,
-    residuals: Sequence[str] = _DEFAULT_RESIDUALS,
+    residuals: Sequence[str] = fitcore.DEFAULT_RESIDUALS,
     weights=None,
     max_nfev: int = 200,
     uncertainty: bool = True,
 ) -> list[Mode]:
+    # long because: its docstring is the method's description and the parameters' reference; the body is one call
     """Fit ``n_modes`` modes with global poles to all channels in a band.
 
     The model is the pole-residue accelerance of the module docstring,
@@ -704,6 +572,21 @@ def auto_fit(
             f"auto_fit: no peak with prominence >= {min_prominence_db} dB "
             f"between f_min={f_min} Hz and f_max={f_max} Hz"
         )
+    groups = _peak_groups(f, Hf, pk, band_factor)
+    lo_all, hi_all = max(f_min, f[0]), min(f_max, f[-1])
+    modes, groups_fitted = _fit_groups(f, Hf, groups, lo_all, hi_all, grow, fit_kwargs)
+    if not modes:
+        raise IdentificationError(
+            f"auto_fit: no mode could be fitted between f_min={f_min} Hz and f_max={f_max} Hz"
+        )
+    if refine and len(groups_fitted) > 1 and len(modes) <= _MAX_JOINT_MODES:
+        modes = _refit_jointly(f, Hf, modes, groups_fitted, fit_kwargs)
+    return sorted(modes, key=lambda m: m.frequency_hz)
+
+
+def _peak_groups(f, Hf, pk, band_factor) -> list[list[tuple]]:
+    """:func:`auto_fit`'s step 1: the peaks ``pk`` as ``(f_n, zeta, interval low, interval high)``
+    (half-power estimates on ``sqrt(MIF)``), sorted, in groups of overlapping intervals."""
     order = np.argsort(pk.frequency_hz)
     mag = np.sqrt(mode_indicator(f, Hf))
     items = []  # (f_n, zeta, interval low, interval high)
@@ -718,7 +601,15 @@ def auto_fit(
             groups[-1].append(it)
         else:
             groups.append([it])
-    lo_all, hi_all = max(f_min, f[0]), min(f_max, f[-1])
+    return groups
+
+
+def _fit_groups(f, Hf, groups, lo_all, hi_all, grow, fit_kwargs) -> tuple[list[Mode], list]:
+    """:func:`auto_fit`'s steps 2 and 3: each group fitted in its band (:func:`_fit_dropping`) and,
+    with ``grow``, given the modes it misses (:func:`_grow`) within its territory.
+
+    Returns the modes of all groups and ``(band, modes)`` of each group fitted.
+    """
     modes, groups_fitted = [], []
     for j, g in enumerate(groups):
         # the group's territory ends a half-power bandwidth short of the modes fitted
@@ -743,25 +634,26 @@ def auto_fit(
             fit = _grow(f, Hf, fit, (t_lo, t_hi), fit_kwargs) if grow else fit
             modes.extend(fit.modes)
             groups_fitted.append((fit.band_hz, fit.modes))
-    if not modes:
-        raise IdentificationError(
-            f"auto_fit: no mode could be fitted between f_min={f_min} Hz and f_max={f_max} Hz"
-        )
-    if refine and len(groups_fitted) > 1 and len(modes) <= _MAX_JOINT_MODES:
-        band = (groups_fitted[0][0][0], groups_fitted[-1][0][1])
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("error", ModeFitWarning)
-                joint = fit_band(f, Hf, band, len(modes), modes, **fit_kwargs).modes
-        except ModeFitWarning:
-            joint = None
-        # keep the joint fit only if no mode moved by more than half its bandwidth
-        if joint is not None and all(
-            abs(a.frequency_hz - b.frequency_hz) <= b.damping_ratio * b.frequency_hz
-            for a, b in zip(joint, sorted(modes, key=lambda m: m.frequency_hz))
-        ):
-            modes = joint
-    return sorted(modes, key=lambda m: m.frequency_hz)
+    return modes, groups_fitted
+
+
+def _refit_jointly(f, Hf, modes, groups_fitted, fit_kwargs) -> list[Mode]:
+    """:func:`auto_fit`'s step 4: all modes refitted over the union of the group bands; the joint
+    fit replaces ``modes`` unless a mode ends at a bound or moved by more than half its bandwidth."""
+    band = (groups_fitted[0][0][0], groups_fitted[-1][0][1])
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", ModeFitWarning)
+            joint = fit_band(f, Hf, band, len(modes), modes, **fit_kwargs).modes
+    except ModeFitWarning:
+        joint = None
+    # keep the joint fit only if no mode moved by more than half its bandwidth
+    if joint is not None and all(
+        abs(a.frequency_hz - b.frequency_hz) <= b.damping_ratio * b.frequency_hz
+        for a, b in zip(joint, sorted(modes, key=lambda m: m.frequency_hz))
+    ):
+        return joint
+    return modes
 
 
 _MAX_JOINT_MODES = 12
@@ -794,7 +686,7 @@ def _fit_dropping(f, H, band, init, fit_kwargs) -> BandFit | None:
         if fit is None:
             init = init[:-1]
             continue
-        good = [m for m in fit.modes if not _suspicious(m, band[0], band[1])]
+        good = [m for m in fit.modes if not fitcore.suspicious(m, band[0], band[1])]
         if len(good) == len(fit.modes):
             return fit
         init = good
@@ -851,7 +743,7 @@ def _grow(f, H, fit: BandFit, territory, fit_kwargs, max_extra=2) -> BandFit:
             trial = _quiet_fit(
                 f, H, (lo, hi), [*fit.modes, (fc, min(max(zc, 0.005), 0.3))], fit_kwargs
             )
-            if trial is None or any(_suspicious(m, lo, hi) for m in trial.modes):
+            if trial is None or any(fitcore.suspicious(m, lo, hi) for m in trial.modes):
                 continue
             new = min(trial.modes, key=lambda m: abs(m.frequency_hz - fc))
             bandwidth = 2.0 * new.damping_ratio * new.frequency_hz

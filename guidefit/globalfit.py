@@ -62,6 +62,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from guidefit import fitcore
 from guidefit.errors import IdentificationError
 from guidefit.globalvp import Fit, SharedProblem, gauss_newton, solve
 
@@ -201,13 +202,11 @@ def _reduced_matrices(f: np.ndarray, H3: np.ndarray, n_max: int, ts: float):
 
 def _lscf_poles(R, S, T, n: int, m: int, ts: float) -> np.ndarray:
     """Poles (rad/s) of the right matrix-fraction denominator of order n (highest coefficient I_m)."""
-    from guidefit.curvefit import _cholesky_inverse
-
     k = n + 1
     c = k * m
     Rn, Sn, Tn = R[:k, :k], S[:, :k, :c], T[:c, :c]
-    # Rn^-1 S through the inverse Cholesky factor of Rn: two matrix products (numpy.linalg, see curvefit._ls_solver)
-    factor_inverse = _cholesky_inverse(Rn)
+    # Rn^-1 S through the inverse Cholesky factor of Rn: two matrix products (numpy.linalg, see fitcore.ls_solver)
+    factor_inverse = fitcore.cholesky_inverse(Rn)
     if factor_inverse is None:
         raise np.linalg.LinAlgError(f"LSCF: the order-{n} basis Gram matrix is not positive definite")
     RinvS = factor_inverse.T @ (factor_inverse @ Sn.transpose(1, 0, 2).reshape(k, -1))
@@ -237,20 +236,18 @@ def _participation(f: np.ndarray, H: np.ndarray, poles: np.ndarray, problem: Sha
     """(n, O) complex modal constants of each pole in every FRF by linear least squares (LSFD).
 
     ``problem``: a :class:`guidefit.globalvp.SharedProblem` of ``(f, H)`` (unit scale, one group, no
-    shift) when the caller has one: its design (the same numbers as ``modes._basis``, residual-term
+    shift) when the caller has one: its design (the same numbers as ``fitcore.basis``, residual-term
     columns made once) and stacked ``H`` serve every order of a diagram.
     """
-    from guidefit import curvefit
-
     prob = problem or SharedProblem(f, H, [slice(None)], [0.0], scale=np.ones(np.shape(H)[1]))
     A, norm = prob._design(np.asarray(poles), 0.0)
     Y = prob.Y
-    solve = curvefit._ls_solver(A)
-    if solve is not None:  # modes._ls_fit's coefficients (its residual is not needed here)
+    solve = fitcore.ls_solver(A)
+    if solve is not None:  # fitcore.ls_fit's coefficients (its residual is not needed here)
         B = solve(A.T @ Y)
         B += solve(A.T @ (Y - A @ B))
     if solve is None or not np.all(np.isfinite(B)):
-        B = curvefit._ls_fit(A, Y)[1]
+        B = fitcore.ls_fit(A, Y)[1]
     B = B / norm[:, None]
     res = B[0 : 2 * poles.size : 2] + 1j * B[1 : 2 * poles.size : 2]  # (n, O)
     return 2j * poles.imag[:, None] * res
@@ -502,12 +499,12 @@ class GlobalFit:
         """The fitted model of one run's FRFs on :attr:`frequency_hz`, ``(F, R_run)``; with the run's
         ``window_tau_s`` as its windowed FRFs were measured (the model at ``s + 1/tau``), else the
         system's own FRFs."""
-        from guidefit import modes as modes_mod
+        from guidefit import modal_base
 
         sl = self.runs[run]
         res = {k: np.asarray(v)[sl] for k, v in self.residuals.items()}
-        return modes_mod.synthesize(self.frequency_hz, [self.run_mode(k, run) for k in range(len(self.modes))], res,
-                                    window_tau_s)
+        return modal_base.synthesize(self.frequency_hz, [self.run_mode(k, run) for k in range(len(self.modes))], res,
+                                     window_tau_s)
 
 
 def _grid_key(frf) -> tuple:
@@ -525,8 +522,6 @@ _gauss_newton = gauss_newton
 def _refine(prob: _Shared, band, init, *, uncertainty=True, max_nfev=200, tol=1e-10):
     """Variable-projection fit from ``init`` [(f, zeta)]; modes that leave the band or hit a bound are
     dropped and the rest refitted. None when nothing is left."""
-    from guidefit import curvefit
-
     init = list(init)
     while init:
         if prob.Y.shape[0] < 2 * (3 * len(init) + 5):
@@ -537,7 +532,7 @@ def _refine(prob: _Shared, band, init, *, uncertainty=True, max_nfev=200, tol=1e
         except (ValueError, np.linalg.LinAlgError):
             init = init[:-1]
             continue
-        good = [(m.frequency_hz, m.damping_ratio) for m in fit.modes if not curvefit._suspicious(m, *band)]
+        good = [(m.frequency_hz, m.damping_ratio) for m in fit.modes if not fitcore.suspicious(m, *band)]
         if len(good) == len(fit.modes):
             return fit
         init = good

@@ -53,8 +53,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from guidefit import curvefit
-from guidefit import modes as modes_mod
+from guidefit import fitcore
+from guidefit.modal_base import Mode
 
 #: a derivative column keeping less than this share of its squared norm outside the design's span is
 #: projected explicitly (:meth:`SharedProblem._project`)
@@ -74,7 +74,7 @@ class SharedProblem:
     ----------
     f : (F,) frequencies (Hz); H : (F, O) complex FRF columns
     groups : list of slices of the columns, one per run; shifts : ``1/tau`` (1/s) per group (0: no window)
-    terms : residual terms (:data:`guidefit.modes._DEFAULT_RESIDUALS`); scale : (O,) column weights
+    terms : residual terms (:data:`guidefit.fitcore.DEFAULT_RESIDUALS`); scale : (O,) column weights
         (default ``1 / RMS`` of each column)
 
     The fits of the last pole set are kept: a residual, then the normal
@@ -85,12 +85,12 @@ class SharedProblem:
     def __init__(self, f, H, groups, shifts, terms=None, scale=None):
         self.f = np.asarray(f, float)
         self.s = 2j * np.pi * self.f
-        self.terms = tuple(terms or modes_mod._DEFAULT_RESIDUALS)
+        self.terms = tuple(terms or fitcore.DEFAULT_RESIDUALS)
         if scale is None:
             rms = np.sqrt(np.mean(np.abs(H) ** 2, axis=0))
             scale = 1.0 / np.where(rms > 0, rms, 1.0)
         self.scale = np.asarray(scale, float)
-        self.Y = curvefit._stack(H * self.scale)
+        self.Y = fitcore.stack(H * self.scale)
         self.groups = list(groups)  # slices of columns
         self.shifts = [float(x) for x in shifts]  # sigma_w (1/s) per group
         self._key = None
@@ -101,7 +101,7 @@ class SharedProblem:
     def _design(self, p, shift):
         """Unit-norm design ``(2F, L)`` at the poles ``p`` for a group's window shift, and the column norms.
 
-        The values of ``guidefit.modes._stack(guidefit.modes._basis(s + shift, p, terms))`` (the same
+        The values of ``guidefit.fitcore.stack(guidefit.fitcore.basis(s + shift, p, terms))`` (the same
         element-wise operations, written into one array; the residual-term columns, which do not
         depend on the poles, made once per shift).
         """
@@ -128,7 +128,7 @@ class SharedProblem:
         """``s + shift``, its square and the stacked residual-term columns, made once per shift."""
         if shift not in self._terms:
             sg = self.s + shift
-            terms = np.stack([modes_mod._RESIDUAL_TERMS[t](sg) for t in self.terms], axis=1) if self.terms \
+            terms = np.stack([fitcore.RESIDUAL_TERMS[t](sg) for t in self.terms], axis=1) if self.terms \
                 else np.zeros((sg.size, 0), complex)
             self._terms[shift] = (sg, sg * sg, np.concatenate([terms.real, terms.imag], axis=0))
         return self._terms[shift]
@@ -143,16 +143,16 @@ class SharedProblem:
         key = (np.asarray(wn, float).tobytes(), np.asarray(z, float).tobytes())
         if key != self._key:
             src = self.share if self.share is not None and self.share._key == key else None
-            p = curvefit._poles(wn, z)
+            p = fitcore.poles(wn, z)
             self._fits = []
             for i, (g, sh) in enumerate(zip(self.groups, self.shifts)):
                 if src is None:
                     Phi, norm = self._design(p, sh)
-                    E, B, solve = curvefit._ls_fit(Phi, self.Y[:, g])
+                    E, B, solve = fitcore.ls_fit(Phi, self.Y[:, g])
                     fit = {"Phi": Phi, "norm": norm, "E": E, "B": B, "solve": solve}
                 else:
                     fit = {k: v for k, v in src._fits[i].items() if k in _DESIGN_PARTS}
-                    fit["E"], fit["B"], fit["solve"] = curvefit._ls_fit(fit["Phi"], self.Y[:, g], fit["solve"])
+                    fit["E"], fit["B"], fit["solve"] = fitcore.ls_fit(fit["Phi"], self.Y[:, g], fit["solve"])
                 self._fits.append(fit)
             self._key = key
         return self._fits
@@ -174,7 +174,7 @@ class SharedProblem:
         pairs ``(2n, 2)``."""
         n = wn.size
         F = self.s.size
-        p = curvefit._poles(wn, z)
+        p = fitcore.poles(wn, z)
         dp = np.concatenate([p, z * wn * (-1.0 - 1j * z / np.sqrt(1.0 - z**2))])
         k = np.concatenate([np.arange(n), np.arange(n)])
         pairs = np.stack([2 * k, 2 * k + 1], axis=1)
@@ -203,7 +203,7 @@ class SharedProblem:
                 raise np.linalg.LinAlgError("rank-deficient design")
             dA, pairs = self._derivatives(wn, z, sh, fit["norm"])
             dPhi = dA.reshape(dA.shape[0], 2 * n, 2).transpose(1, 0, 2)  # (2n, 2F, 2)
-            J[:, g, :] = curvefit._projected_jacobian(fit["Phi"], dPhi, pairs, fit["E"], fit["B"], fit["solve"])
+            J[:, g, :] = fitcore.projected_jacobian(fit["Phi"], dPhi, pairs, fit["E"], fit["B"], fit["solve"])
         return J.reshape(-1, 2 * n)
 
     def normal(self, wn, z) -> tuple[np.ndarray, np.ndarray, float]:
@@ -233,7 +233,7 @@ class SharedProblem:
         their norm outside the design's span (0.45-0.67 on the benchmark
         files, 1e-15 relative error in D), and a column below
         :data:`EXPLICIT_PROJECTION` of it is projected explicitly instead
-        (guidefit.modes._ls_fit's fit with one refinement step).
+        (:func:`guidefit.fitcore.ls_fit`'s fit with one refinement step).
         """
         n = wn.size
         A, solve = fit["Phi"], fit["solve"]
@@ -334,7 +334,7 @@ class Fit:
 
 def _mode_list(wn, z, B, std_wn, std_z) -> list:
     n = wn.size
-    return [modes_mod.Mode(float(wn[k] / (2 * np.pi)), float(z[k]), B[2 * k] + 1j * B[2 * k + 1], "global_fit",
+    return [Mode(float(wn[k] / (2 * np.pi)), float(z[k]), B[2 * k] + 1j * B[2 * k + 1], "global_fit",
                            float(std_wn[k] / (2 * np.pi)), float(std_z[k])) for k in range(n)]
 
 
@@ -413,7 +413,7 @@ def gauss_newton(prob: SharedProblem, band, init, iterations: int = 4) -> Fit | 
     dof = prob.Y.size - 2 * n - B.size
     sd = np.sqrt(np.maximum(np.diag(np.linalg.pinv(JtJ)) * cost / max(dof, 1), 0.0))
     modes = _mode_list(wn, z, B, sd[:n] * wn, sd[n:] * z)
-    if any(curvefit._suspicious(m, *band) for m in modes):
+    if any(fitcore.suspicious(m, *band) for m in modes):
         return None
     order = np.argsort([m.frequency_hz for m in modes])
     return Fit([modes[k] for k in order], {t: B[2 * n + j].copy() for j, t in enumerate(prob.terms)},

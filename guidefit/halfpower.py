@@ -50,6 +50,7 @@ def half_power(
     min_bins: float = 3.0,
     strict: bool = False,
 ) -> HalfPower:
+    # long because: its docstring (the method, its accuracy, the parameters, a doctest) is 80 of the lines
     """Half-power (-3 dB) bandwidth damping of one peak, Eq. (26) and Eq. (28).
 
     The paper's single-DOF estimate ``xi = (f2 - f1) / (2 f)`` (Eq. (26) for
@@ -136,6 +137,25 @@ def half_power(
     i = int(peak_index)
     if not 0 <= i < f.size:
         raise ValueError(f"peak_index must be in [0, {f.size - 1}], got {peak_index}")
+    i = _climb(f, mag, i, peak_index)
+    f_peak, h_peak = _peak_vertex(f, mag, i, peak_interpolation)
+    f1, f2 = _band_edges(f, mag, i, f_peak, h_peak)
+    zeta = (f2 - f1) / (2.0 * f_peak)  # Eq. (26) / Eq. (28)
+    n_bins = (f2 - f1) / float(np.median(np.diff(f[max(i - 3, 0) : i + 4])))
+    if n_bins < min_bins:
+        msg = (
+            f"half_power: band of the peak at {f_peak:.1f} Hz spans {n_bins:.1f} bins "
+            f"(min_bins={min_bins}); zeta={zeta:.4g} is biased, use fit_modes"
+        )
+        if strict:
+            raise IdentificationError(msg)
+        warnings.warn(msg, HalfPowerWarning, stacklevel=2)
+    return HalfPower(float(f_peak), float(f1), float(f2), float(zeta))
+
+
+def _climb(f, mag, i: int, peak_index) -> int:
+    """The local maximum of ``mag`` reached by climbing from bin ``i``; an
+    :class:`~guidefit.errors.IdentificationError` at the array edge or a zero magnitude."""
     while True:  # climb to the local maximum
         if i > 0 and mag[i - 1] > mag[i]:
             i -= 1
@@ -149,6 +169,12 @@ def half_power(
         )
     if mag[i] <= 0:
         raise IdentificationError(f"half_power: zero magnitude at peak_index={peak_index}")
+    return i
+
+
+def _peak_vertex(f, mag, i: int, peak_interpolation: str) -> tuple[float, float]:
+    """``(f_peak, |H_peak|)``: the vertex of the parabola through bins ``i - 1 .. i + 1`` of
+    ``1/|H|^2``, ``ln|H|`` or ``|H|`` (``peak_interpolation``), not below the bin's own level."""
     x3, m3 = f[i - 1 : i + 2], mag[i - 1 : i + 2]
     if np.any(m3 <= 0):
         f_peak, h_peak = float(f[i]), float(mag[i])
@@ -160,7 +186,13 @@ def half_power(
         h_peak = math.exp(y)
     else:
         f_peak, h_peak = _parabolic_vertex(x3, m3)
-    h_peak = max(h_peak, float(mag[i]))
+    return f_peak, max(h_peak, float(mag[i]))
+
+
+def _band_edges(f, mag, i: int, f_peak: float, h_peak: float) -> tuple[float, float]:
+    """``(f1, f2)``: where ``ln|H|`` falls through ``|H_peak| / sqrt(2)`` on either side of bin ``i``
+    (:func:`_crossing`); an :class:`~guidefit.errors.IdentificationError` when the peak is narrower
+    than one bin."""
     with np.errstate(divide="ignore"):
         logmag = np.log(mag)
     thr = math.log(h_peak) - 0.5 * math.log(2.0)
@@ -171,17 +203,7 @@ def half_power(
         )
     f1 = _crossing(f, logmag, i, thr, -1)
     f2 = _crossing(f, logmag, i, thr, +1)
-    zeta = (f2 - f1) / (2.0 * f_peak)  # Eq. (26) / Eq. (28)
-    n_bins = (f2 - f1) / float(np.median(np.diff(f[max(i - 3, 0) : i + 4])))
-    if n_bins < min_bins:
-        msg = (
-            f"half_power: band of the peak at {f_peak:.1f} Hz spans {n_bins:.1f} bins "
-            f"(min_bins={min_bins}); zeta={zeta:.4g} is biased, use fit_modes"
-        )
-        if strict:
-            raise IdentificationError(msg)
-        warnings.warn(msg, HalfPowerWarning, stacklevel=2)
-    return HalfPower(float(f_peak), float(f1), float(f2), float(zeta))
+    return f1, f2
 
 
 def _crossing(f, logmag, i, thr, step, rise_db=1.0) -> float:

@@ -3,7 +3,9 @@
 :func:`_assess_rows` runs the checks (``non_finite``, ``negative``, ``too_weak``,
 ``double_hit``, ``clipped``, ``dropout``, ``flat_end``, ``not_decayed``; see
 :mod:`guidefit.hits` for what each means) on the channel rows of one record,
-with its helpers (:func:`_double_hit`, :func:`_dropout`, :func:`_flat_end`,
+one helper per check giving its reason (:func:`_non_finite`, :func:`_too_weak`,
+:func:`_clipped`, :func:`_dropped_out`, :func:`_flat_ends`, :func:`_not_decayed`)
+on top of the detectors (:func:`_double_hit`, :func:`_dropout`, :func:`_flat_end`,
 :func:`_flat_top`, :func:`_median`...). They are kept apart from
 :mod:`guidefit.hits`, which finds the hits and reads them from the file, because
 they are pure functions of the samples (no file, no iteration state): they can
@@ -64,30 +66,22 @@ def _assess(data, run: Run, s, pre: int | None, median_peak, force_base=None):
 def _assess_rows(columns, run: Run, s, pre: int | None, median_peak, force_base=None,
                  extremes=None):
     """:func:`_assess` of the channel rows ``columns`` (C, n), SI, float64 or float32 (``extremes``: their
-    max and min per row, if known)."""
+    max and min per row, if known).
+
+    The checks in turn: corrupt samples (:func:`_non_finite`, which ends the assessment), the
+    force peak's sign, then ``too_weak``, ``double_hit``, ``clipped``, ``dropout``, ``flat_end``
+    and ``not_decayed`` (each by a helper below that returns its reason or ``None``).
+    """
     names = run.channel_names
     fs = run.sample_rate_hz
     fi = run.force_index
-    n = columns.shape[1]
     metrics = dict.fromkeys(_METRICS, math.nan)
     # max and min of each channel: NaN if it holds a NaN, +-Inf if an Inf
     tops, bottoms = extremes if extremes is not None else (columns.max(axis=1), columns.min(axis=1))
     # a sample beyond +-1e100 (a corrupt one: no force or acceleration comes near) would overflow the spectra
     if not (np.all(np.abs(tops) < _ABSURD_SAMPLE) and np.all(np.abs(bottoms) < _ABSURD_SAMPLE)):
         # False for NaN too (every finite float32 is below 1e100)
-        finite = np.isfinite(columns) if columns.dtype == np.float32 else np.abs(columns) < _ABSURD_SAMPLE
-        bad = [names[c] for c in np.flatnonzero(~finite.all(axis=1))]
-        force = columns[fi][finite[fi]].astype(np.float64, copy=False)  # a rare hit: float64 arithmetic
-        peak = _signed_extreme(force - np.median(force)) if force.size else math.nan
-        count = int((~finite).sum())
-        return (
-            ["non_finite"],
-            [f"non_finite: {count} NaN/Inf{'' if count == (~np.isfinite(columns)).sum() else ' or corrupt (beyond 1e100)'} "
-             f"sample(s) in {', '.join(bad)}"],
-            peak,
-            pre,
-            metrics,
-        )
+        return (*_non_finite(columns, names, fi), pre, metrics)
     quiet = slice(0, pre - 2) if pre is not None and pre >= 16 else None
     force = columns[fi]
     if force_base is None:
@@ -101,15 +95,7 @@ def _assess_rows(columns, run: Run, s, pre: int | None, median_peak, force_base=
             bases[c] = _median(col[quiet]) if quiet else _median(col)
         return bases[c]
 
-    # p = argmax |fc| (its first occurrence); max and min of fc from those of
-    # the force (rounding is monotone), so only the winning side is searched
-    top, bottom = tops[fi] - force_base, bottoms[fi] - force_base
-    if top > -bottom:
-        p = int(np.argmax(fc))
-    elif top < -bottom:
-        p = int(np.argmin(fc))
-    else:
-        p = min(int(np.argmax(fc)), int(np.argmin(fc)))
+    p = _peak_index(fc, tops[fi] - force_base, bottoms[fi] - force_base)
     peak = float(fc[p])
     if peak <= 0:
         if peak == 0:
@@ -128,8 +114,50 @@ def _assess_rows(columns, run: Run, s, pre: int | None, median_peak, force_base=
     ):  # stored hit without pretrigger_samples: where the force reaches the trigger level
         level = s.trigger_level_n if s.trigger_level_n is not None else s.trigger_fraction * peak
         pre = int(np.argmax(fc >= min(level, peak)))
-    codes, reasons = [], []
+    double = _double_hit(fc, p, peak, fs, s, metrics)
+    found = {
+        "too_weak": _too_weak(peak, median_peak, s),
+        "double_hit": f"double_hit: {double}" if double else None,
+        "clipped": _clipped(columns, run, s, tops, bottoms),
+        "dropout": _dropped_out(columns, run, s, quiet, pre, base),
+        "flat_end": _flat_ends(columns, run, quiet, pre, base, tops, bottoms),
+    }
+    metrics["end_ratio"], found["not_decayed"] = _not_decayed(columns, run, s, quiet, base, tops, bottoms)
+    codes = [code for code, reason in found.items() if reason is not None]
+    return codes, [found[code] for code in codes], peak, pre, metrics
 
+
+def _non_finite(columns, names, fi) -> tuple[list, list, float]:
+    """``(codes, reasons, signed peak)`` of a record holding a NaN, an Inf or a sample beyond
+    +-1e100 (a corrupt one): ``non_finite``, with the count and the channels."""
+    finite = np.isfinite(columns) if columns.dtype == np.float32 else np.abs(columns) < _ABSURD_SAMPLE
+    bad = [names[c] for c in np.flatnonzero(~finite.all(axis=1))]
+    force = columns[fi][finite[fi]].astype(np.float64, copy=False)  # a rare hit: float64 arithmetic
+    peak = _signed_extreme(force - np.median(force)) if force.size else math.nan
+    count = int((~finite).sum())
+    return (
+        ["non_finite"],
+        [f"non_finite: {count} NaN/Inf{'' if count == (~np.isfinite(columns)).sum() else ' or corrupt (beyond 1e100)'} "
+         f"sample(s) in {', '.join(bad)}"],
+        peak,
+    )
+
+
+def _peak_index(fc, top, bottom) -> int:
+    """``argmax |fc|`` (its first occurrence), given ``top`` and ``bottom``, the max and min of ``fc``.
+
+    The max and min of fc come from those of the force (rounding is monotone), so only the
+    winning side is searched.
+    """
+    if top > -bottom:
+        return int(np.argmax(fc))
+    if top < -bottom:
+        return int(np.argmin(fc))
+    return min(int(np.argmax(fc)), int(np.argmin(fc)))
+
+
+def _too_weak(peak, median_peak, s) -> str | None:
+    """The ``too_weak`` reason when the force peak is below the minimum or the run's median share."""
     limit, why = 0.0, ""
     if s.min_peak_force_n is not None:
         limit, why = s.min_peak_force_n, "the minimum"
@@ -141,36 +169,40 @@ def _assess_rows(columns, run: Run, s, pre: int | None, median_peak, force_base=
         limit = s.min_peak_fraction * median_peak
         why = f"{s.min_peak_fraction:.0%} of the run's median peak {median_peak:.4g} N"
     if peak < limit:
-        codes.append("too_weak")
-        reasons.append(f"too_weak: peak {peak:.4g} N below {limit:.4g} N ({why})")
+        return f"too_weak: peak {peak:.4g} N below {limit:.4g} N ({why})"
+    return None
 
-    double = _double_hit(fc, p, peak, fs, s, metrics)
-    if double:
-        codes.append("double_hit")
-        reasons.append(f"double_hit: {double}")
 
+def _clipped(columns, run: Run, s, tops, bottoms) -> str | None:
+    """The ``clipped`` reason: the channels with a flat top or bottom (:func:`_flat_top`)."""
     clipped = []
     for c in range(columns.shape[0]):
         flat = _flat_top(columns[c], s.clip_min_run, float(tops[c]), float(bottoms[c]))
         if flat is not None:
             m, value = flat
             unit = run.channels[c].unit_si
-            clipped.append(f"{names[c]} ({m} samples at {value:.6g} {unit})")
-    if clipped:
-        codes.append("clipped")
-        reasons.append(f"clipped: {', '.join(clipped)}")
+            clipped.append(f"{run.channel_names[c]} ({m} samples at {value:.6g} {unit})")
+    return f"clipped: {', '.join(clipped)}" if clipped else None
 
+
+def _dropped_out(columns, run: Run, s, quiet, pre, base) -> str | None:
+    """The ``dropout`` reason: every channel frozen while the response rings (:func:`_dropout`)."""
+    fs = run.sample_rate_hz
     dropout = _dropout(
         columns, run.response_indices, quiet, pre, max(8, round(s.dropout_min_s * fs)), base
     )
-    if dropout is not None:
-        a, m = dropout
-        codes.append("dropout")
-        reasons.append(
-            f"dropout: every channel frozen for {m} samples ({m / fs * 1e3:.3g} ms) from sample {a}, "
-            "while the response is still ringing"
-        )
+    if dropout is None:
+        return None
+    a, m = dropout
+    return (
+        f"dropout: every channel frozen for {m} samples ({m / fs * 1e3:.3g} ms) from sample {a}, "
+        "while the response is still ringing"
+    )
 
+
+def _flat_ends(columns, run: Run, quiet, pre, base, tops, bottoms) -> str | None:
+    """The ``flat_end`` reason: response channels held at one value to the end (:func:`_flat_end`)."""
+    names, fs, n = run.channel_names, run.sample_rate_hz, columns.shape[1]
     flat = []
     for c in run.response_indices:
         noise = 0.0
@@ -185,10 +217,13 @@ def _assess_rows(columns, run: Run, s, pre: int | None, median_peak, force_base=
                 f"{names[c]} held at {value:.6g} {run.channels[c].unit_si} for its last "
                 f"{(n - k) / fs * 1e3:.3g} ms (from sample {k}), right after ringing at {lsbs:.3g} LSB"
             )
-    if flat:
-        codes.append("flat_end")
-        reasons.append(f"flat_end: {', '.join(flat)} (DAQ stopped or padded export?)")
+    return f"flat_end: {', '.join(flat)} (DAQ stopped or padded export?)" if flat else None
 
+
+def _not_decayed(columns, run: Run, s, quiet, base, tops, bottoms) -> tuple[float, str | None]:
+    """``(end_ratio, reason)``: the largest ratio of a response channel's end RMS (times sqrt 2) to
+    its peak, and the ``not_decayed`` reason when one is above the limit and above the noise."""
+    names, n = run.channel_names, columns.shape[1]
     n_end = max(8, math.ceil(s.decay_end_fraction * n))
     worst = 0.0
     slow = []
@@ -211,13 +246,9 @@ def _assess_rows(columns, run: Run, s, pre: int | None, median_peak, force_base=
         worst = max(worst, ratio)
         if ratio > s.max_end_ratio and rms_end > 3 * noise:
             slow.append(f"{names[c]} ends at {ratio:.0%} of its peak")
-    metrics["end_ratio"] = worst
     if slow:
-        codes.append("not_decayed")
-        reasons.append(
-            f"not_decayed: {', '.join(slow)} (limit {s.max_end_ratio:.0%}, a longer record helps)"
-        )
-    return codes, reasons, peak, pre, metrics
+        return worst, f"not_decayed: {', '.join(slow)} (limit {s.max_end_ratio:.0%}, a longer record helps)"
+    return worst, None
 
 
 def _median(x: np.ndarray) -> np.float64:

@@ -74,6 +74,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from guidefit.fitcore import RESIDUAL_TERMS
 from guidefit.prominence import prominent_peaks
 
 __all__ = [
@@ -93,14 +94,6 @@ __all__ = [
 
 _KINDS = ("accelerance", "mobility", "receptance")
 _PEAK_INTERPOLATIONS = ("inverse_square", "log", "linear")
-#: residual terms of the fitted accelerance; each enters with one real coefficient per channel
-_RESIDUAL_TERMS = {
-    "lower": lambda s: np.ones_like(s),  # L_r: mass line of the modes below the band
-    "lower_damping": lambda s: 1.0 / s,  # L1_r / (jw): their damping tail
-    "upper": lambda s: s * s,  # U_r (jw)^2: compliance of the modes above the band
-    "upper_damping": lambda s: s**3,  # U1_r (jw)^3: their damping
-}
-_DEFAULT_RESIDUALS = ("lower", "lower_damping", "upper")
 
 
 class HalfPowerWarning(UserWarning):
@@ -326,6 +319,30 @@ def _parabolic_vertex(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
     return float(x1 + t), float(y1 + b * t + a * t * t)
 
 
+def _db_peaks(f, db, min_prominence_db, min_distance_hz) -> tuple[np.ndarray, np.ndarray]:
+    """``(index, prominence)`` of the peaks of ``db`` at least ``min_prominence_db`` prominent
+    (and ``min_distance_hz`` apart, by :func:`scipy.signal.find_peaks`, when given)."""
+    if min_distance_hz is not None:
+        if not min_distance_hz > 0:
+            raise ValueError(f"min_distance_hz must be > 0, got {min_distance_hz}")
+        import scipy.signal
+
+        distance = max(1.0, min_distance_hz / float(np.median(np.diff(f))))
+        idx, props = scipy.signal.find_peaks(db, prominence=min_prominence_db, distance=distance)
+        return idx, props["prominences"]
+    return prominent_peaks(db, min_prominence_db)
+
+
+def _above_noise(H, mif, idx, prom, min_snr_db) -> np.ndarray:
+    """Which peaks rise above their base by ``min_snr_db`` over the noise power (:func:`_noise_power`)."""
+    # noise power in MIF units: sum_r sigma_r^2 / mean|H_r|^2
+    mean = np.mean(np.abs(H) ** 2, axis=0)
+    used = mean > 0
+    nu = float(np.sum(_noise_power(H)[used] / mean[used]))
+    excess = mif[idx] * (1.0 - 10.0 ** (-prom / 10.0))
+    return excess >= nu * 10.0 ** (min_snr_db / 10.0)
+
+
 def find_peaks(
     frequency_hz,
     H,
@@ -409,27 +426,13 @@ def find_peaks(
     mif = mode_indicator(f[sel], H[sel])
     tiny = np.finfo(float).tiny
     db = 10.0 * np.log10(np.maximum(mif, tiny))
-    if min_distance_hz is not None:
-        if not min_distance_hz > 0:
-            raise ValueError(f"min_distance_hz must be > 0, got {min_distance_hz}")
-        import scipy.signal
-
-        distance = max(1.0, min_distance_hz / float(np.median(np.diff(f[sel]))))
-        idx, props = scipy.signal.find_peaks(db, prominence=min_prominence_db, distance=distance)
-        prom = props["prominences"]
-    else:
-        idx, prom = prominent_peaks(db, min_prominence_db)
+    idx, prom = _db_peaks(f[sel], db, min_prominence_db, min_distance_hz)
     if idx.size == 0:
         return empty
     keep = db[idx] >= db[idx].max() - floor_db
     idx, prom = idx[keep], prom[keep]
     if min_snr_db is not None and idx.size:
-        # noise power in MIF units: sum_r sigma_r^2 / mean|H_r|^2
-        mean = np.mean(np.abs(H[sel]) ** 2, axis=0)
-        used = mean > 0
-        nu = float(np.sum(_noise_power(H[sel])[used] / mean[used]))
-        excess = mif[idx] * (1.0 - 10.0 ** (-prom / 10.0))
-        keep = excess >= nu * 10.0 ** (min_snr_db / 10.0)
+        keep = _above_noise(H[sel], mif, idx, prom, min_snr_db)
         idx, prom = idx[keep], prom[keep]
     order = np.argsort(-prom, kind="stable")
     if max_peaks is not None:
@@ -479,8 +482,8 @@ def synthesize(frequency_hz, modes: Sequence[Mode], residuals: dict | None = Non
     if not modes and not residuals:
         raise ValueError("synthesize needs at least one mode or residual term")
     for name in residuals:
-        if name not in _RESIDUAL_TERMS:
-            raise ValueError(f"residuals keys must be in {tuple(_RESIDUAL_TERMS)}, got {name!r}")
+        if name not in RESIDUAL_TERMS:
+            raise ValueError(f"residuals keys must be in {tuple(RESIDUAL_TERMS)}, got {name!r}")
     if modes:
         R = np.asarray(modes[0].residues).size
     else:
@@ -497,7 +500,7 @@ def synthesize(frequency_hz, modes: Sequence[Mode], residuals: dict | None = Non
         c = np.asarray(c, dtype=float).reshape(-1)
         if c.size != R:
             raise ValueError(f"residuals[{name!r}] has {c.size} channels, expected {R}")
-        H += _RESIDUAL_TERMS[name](s) * c[None, :]
+        H += RESIDUAL_TERMS[name](s) * c[None, :]
     return H
 
 

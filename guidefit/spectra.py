@@ -253,12 +253,39 @@ def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windo
     or a function of the record length giving how many of the first bins to sum
     (the FFT is whole either way; the bins above are not summed).
     """
-    from concurrent.futures import ThreadPoolExecutor
-
-    import scipy.fft
-
-    early = _early_buffers(expect, precision, force_index, n_groups, workers, pair, n_bins)
     source = iter(items)
+    # the early buffers are passed on, not kept here: once the first records are in them, the future
+    # holding them must go, or it keeps the first records' memory alive
+    pulled = _pull_first(source, _early_buffers(expect, precision, force_index, n_groups, workers, pair, n_bins),
+                         precision, force_index, n_groups, workers, pair, n_bins)
+    if pulled is None:
+        return None
+    space, first, acc, n_bufs, block = pulled
+    del pulled
+    c, n = first.shape[1:]
+    k = first.shape[0]
+    window_rows, quiet = _window_first(first, windows, force_index, force_offset)
+    if space.shape[0] > n_bufs * block:  # the first records did not fit in the buffers
+        space = np.empty((n_bufs * block, c, n))
+    elif first.base is space:  # already in place in the buffers
+        first = None
+    bufs = [space[i * block:(i + 1) * block] for i in range(n_bufs)]
+    acc.precision = _precision_name(space.dtype)
+    del space
+    # the filler holds the only reference to the first records, and drops it once they are in a block
+    fill = _block_filler(source, bufs, first, k, window_rows, quiet, force_index)
+    del first
+    return _transform_blocks(fill, bufs, acc, workers - 1)
+
+
+def _pull_first(source, early, precision, force_index, n_groups, workers, pair, n_bins):
+    """The first (up to ``_WINDOW_HITS``) records of ``source``, copied transposed into the memory
+    of a :class:`_Buffers` (``early``'s when it fits them, else new).
+
+    Returns ``(space, first, acc, n_bufs, block)``: the block buffers' memory, the first records
+    ``(hits, C, n)`` (a view into ``space`` when they fit in it), the accumulator and the buffers'
+    count and size; ``None`` when ``source`` holds no record.
+    """
     first = None  # the first records, (hits, C, n); in the block buffers when they fit
     k = 0
     for _, record in source:
@@ -274,16 +301,23 @@ def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windo
             n_first, block, n_bufs = mem.n_first, mem.block, mem.n_bufs
             space, first, acc = mem.space, mem.first, mem.acc
             del mem
-            helpers = workers - 1  # threads besides the calling one
         np.copyto(first[k], record.T)
         k += 1
         if k == n_first:
             break
     if first is None:
         return None
-    del record
-    first = first[:k]
-    fi = force_index
+    return space, first[:k], acc, n_bufs, block
+
+
+def _window_first(first, windows, fi, force_offset):
+    """Choose the windows from the first records and apply them (and the force offset) in place.
+
+    Returns ``(window_rows, quiet)``: the window row of each channel, ``(n,)`` views, and the
+    quiet samples after the force window whose median is the force's offset (``None`` without
+    ``force_offset`` or with fewer than 16 of them), see :func:`_force_offset`.
+    """
+    c = first.shape[1]
     w_force, w_resp = windows(first)
     w_pair = (np.array(w_force, dtype=float), np.array(w_resp, dtype=float))  # (n,) each
     window_rows = [w_pair[0] if ch == fi else w_pair[1] for ch in range(c)]  # views, per channel
@@ -292,19 +326,20 @@ def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windo
     quiet = np.flatnonzero(window_t[fi] == 0.0)[-512:] if force_offset else np.empty(0)
     quiet = quiet if quiet.size >= 16 else None  # the last <= 512 quiet samples: plenty, cheap
     if quiet is not None:
-        for j in range(k):
+        for j in range(first.shape[0]):
             first[j, fi] -= _force_offset(first[j, fi, quiet], first[j, fi])
     first *= window_t
-    if space.shape[0] > n_bufs * block:  # the first records did not fit in the buffers
-        space = np.empty((n_bufs * block, c, n))
-    elif first.base is space:  # already in place in the buffers
-        first = None
-    bufs = [space[i * block:(i + 1) * block] for i in range(n_bufs)]
-    ready = k  # windowed first records not yet handed to a block
-    free = [threading.Event() for _ in range(n_bufs)]  # set: the buffer may be refilled
-    for event in free:
-        event.set()
-    acc.precision = _precision_name(dtype)
+    return window_rows, quiet
+
+
+def _block_filler(source, bufs, first, ready, window_rows, quiet, fi):
+    """``fill(turn)``: windowed records into ``bufs[turn]`` (block, C, n); returns how many.
+
+    The ``ready`` windowed first records come first (copied from ``first``, or in place already
+    when ``first`` is None), then the records still in ``source``, each multiplied row by row by
+    its channel's window while being copied (and its force offset removed with ``quiet``).
+    """
+    block, c = bufs[0].shape[:2]
 
     def fill(turn: int) -> int:
         """Windowed records into ``bufs[turn]`` (block, C, n); how many."""
@@ -332,6 +367,21 @@ def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windo
                     break
         return k
 
+    return fill
+
+
+def _transform_blocks(fill, bufs, acc: _Accumulator, helpers: int) -> _Accumulator:
+    """Fill, FFT and add the blocks in turn until ``fill`` runs dry; ``helpers`` threads besides
+    the calling one transform (see :func:`_run_blocks`). The spectra are added in block order."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    import scipy.fft
+
+    n_bufs = len(bufs)
+    block = bufs[0].shape[0]
+    free = [threading.Event() for _ in range(n_bufs)]  # set: the buffer may be refilled
+    for event in free:
+        event.set()
     # spectra of transformed blocks wait here, by block number, to be added in order
     transformed: dict[int, tuple[np.ndarray, int]] = {}
     state = {"next": 0}  # the block to add next

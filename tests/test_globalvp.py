@@ -67,14 +67,14 @@ def test_explicit_projection_of_derivatives_near_the_design_span_gives_the_same_
     np.testing.assert_allclose(gram, explicit, rtol=1e-9, atol=1e-9 * np.abs(explicit).max())
 
 
-def test_design_is_guidefit_modes_basis_stacked_and_normalised():
-    from guidefit import modes as modes_mod
+def test_design_is_the_fitcore_basis_stacked_and_normalised():
+    from guidefit import fitcore
 
     prob, wn, z = _problem()
-    p = modes_mod._poles(wn, z)
+    p = fitcore.poles(wn, z)
     for shift in prob.shifts:
         Phi, norm = prob._design(p, shift)
-        ref = modes_mod._stack(modes_mod._basis(prob.s + shift, p, prob.terms))
+        ref = fitcore.stack(fitcore.basis(prob.s + shift, p, prob.terms))
         np.testing.assert_allclose(norm, np.sqrt(np.sum(ref**2, axis=0)), rtol=1e-14)
         np.testing.assert_allclose(Phi, ref / norm, rtol=1e-14, atol=1e-16)
 

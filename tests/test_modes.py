@@ -508,21 +508,21 @@ def test_variable_projection_jacobian_matches_central_differences(per_channel_we
     # so check it directly. Central differences with h = 1e-6 in ln(w_n),
     # ln(zeta) are accurate to about h^2 times the third derivative, ~1e-8
     # relative here; the analytic one must agree to 1e-6.
-    from guidefit import modes as modes_mod
+    from guidefit import curvefit, fitcore
 
     rng = np.random.default_rng(4)
     f = np.arange(1500.0, 3000.0, 2.0)
     truth = [make_mode(2000.0, 0.02, [0.3, -0.2, 0.1]), make_mode(2300.0, 0.05, [0.1, 0.2, -0.3])]
     H = synthesize(f, truth) + 1e-3 * rng.normal(size=(f.size, 3))
     W = rng.uniform(0.5, 1.5, size=H.shape) if per_channel_weights else None
-    prob = modes_mod._Problem(f, H, W, ("lower", "lower_damping", "upper"))
+    prob = curvefit._Problem(f, H, W, ("lower", "lower_damping", "upper"))
     x = np.log([2 * np.pi * 2020.0, 2 * np.pi * 2280.0, 0.025, 0.04])  # off the optimum
 
     def residual(x):
-        wn, zeta = modes_mod._unpack(x)
-        return prob.residual(modes_mod._poles(wn, zeta))
+        wn, zeta = fitcore.unpack(x)
+        return prob.residual(fitcore.poles(wn, zeta))
 
-    J = prob.jacobian(*modes_mod._unpack(x))
+    J = prob.jacobian(*fitcore.unpack(x))
     h = 1e-6
     J_fd = np.stack([(residual(x + h * e) - residual(x - h * e)) / (2 * h) for e in np.eye(4)], 1)
     assert J.shape == J_fd.shape == (2 * f.size * 3, 4)

@@ -117,6 +117,52 @@ def _count_lines(p: Path) -> int:
 
 
 def _read_csv_stream(p: Path, display: str, fh) -> Recording:
+    """The recording of the contract CSV text ``fh`` (open on ``p``; ``display``: the path as given).
+
+    The ``# key: value`` lines and the header row (:func:`_csv_metadata`), the
+    numbers (:func:`_csv_numbers`), then the metadata checked in the order of
+    the contract: format and run (:func:`_csv_identity`), sample rate
+    (:func:`_csv_rate`), excitation (:func:`_csv_excitation`), units
+    (:func:`_csv_units`), channel geometry (:func:`_csv_channels`) and the
+    pre-trigger. The first error found is raised as a
+    :class:`~guidefit.errors.RecordingError` that names the line.
+    """
+    meta, header_line, header_no = _csv_metadata(fh, display)
+    names, has_time = _csv_header(header_line.rstrip("\r\n"), header_no, display)
+    table = _csv_numbers(fh, header_no + 1, names, display, _count_lines(p) - header_no)
+    if table.shape[0] == 0:
+        raise RecordingError(f"{display}: no data rows after the header (line {header_no})")
+    guide, description, run_name = _csv_identity(meta, p, display)
+    rate, table, names = _csv_rate(meta, table, names, has_time, display)
+    exc_dir, exc_pos = _csv_excitation(meta, display)
+    units = _csv_units(meta, names, has_time, display)
+    channels, force_index = _csv_channels(meta, names, units, exc_dir, exc_pos, guide, display)
+    pretrigger = None
+    if "pretrigger_samples" in meta:
+        where = _csv_line_of(meta, "pretrigger_samples", display)
+        pretrigger = _check_pretrigger(_csv_float(meta["pretrigger_samples"][0], where), table.shape[0], where)
+    data = table  # (a view without the time column: no second copy of the samples)
+    data.setflags(write=False)
+    run = Run(
+        name=run_name,
+        sample_rate_hz=rate,
+        excitation_direction=_frozen_array(exc_dir),
+        excitation_position_m=None if exc_pos is None else _frozen_array(exc_pos),
+        channels=channels,
+        layout="signals",
+        n_samples=int(data.shape[0]),
+        n_hits_stored=0,
+        pretrigger_samples=pretrigger,
+        source=ArraySource(data),
+        force_index=force_index,
+        file=display,
+    )
+    return Recording(path=display, guide=guide, description=description, runs=(run,))
+
+
+def _csv_metadata(fh, display: str) -> tuple[dict[str, tuple[str, int]], str, int]:
+    """``(meta, header_line, header_no)``: the known ``# key: value`` lines before the header row,
+    as ``{key: (value, line number)}``, and the header row and its line number."""
     meta: dict[str, tuple[str, int]] = {}
     header_line = None
     line_no = 0
@@ -145,24 +191,26 @@ def _read_csv_stream(p: Path, display: str, fh) -> Recording:
         raise RecordingError(
             f"{display}: no header row; expected a line of channel names such as 'time,force,acc_A_y'"
         )
-    header_no = line_no
-    names, has_time = _csv_header(header_line.rstrip("\r\n"), header_no, display)
-    table = _csv_numbers(fh, header_no + 1, names, display, _count_lines(p) - header_no)
-    if table.shape[0] == 0:
-        raise RecordingError(f"{display}: no data rows after the header (line {header_no})")
+    return meta, header_line, line_no
 
-    def line_of(key):
-        return f"{display}: line {meta[key][1]} '{key}'"
 
+def _csv_line_of(meta, key: str, display: str) -> str:
+    """Where a metadata key was given: ``"<file>: line <n> '<key>'"``."""
+    return f"{display}: line {meta[key][1]} '{key}'"
+
+
+def _csv_identity(meta, p: Path, display: str) -> tuple[str | None, str, str]:
+    """``(guide, description, run name)`` after the format and version checks."""
     if "format" in meta and meta["format"][0] != FORMAT_NAME:
         raise RecordingError(
-            f"{line_of('format')}: '{meta['format'][0]}'; expected '{FORMAT_NAME}'"
+            f"{_csv_line_of(meta, 'format', display)}: '{meta['format'][0]}'; expected '{FORMAT_NAME}'"
         )
     if "format_version" in meta:
         value = meta["format_version"][0]
         if value.strip() != str(FORMAT_VERSION):
             raise RecordingError(
-                f"{line_of('format_version')}: '{value}' is not supported; this guidefit reads version {FORMAT_VERSION}"
+                f"{_csv_line_of(meta, 'format_version', display)}: '{value}' is not supported; "
+                f"this guidefit reads version {FORMAT_VERSION}"
             )
     guide = meta.get("guide", ("", 0))[0] or None
     description = meta.get("description", ("", 0))[0]
@@ -171,13 +219,16 @@ def _read_csv_stream(p: Path, display: str, fh) -> Recording:
         raise RecordingError(
             f"{display}: run name '{run_name}' not allowed; expected text without '/'"
         )
+    return guide, description, run_name
 
+
+def _csv_rate(meta, table, names, has_time, display: str):
+    """``(sample rate, table, names)``: the rate from ``sample_rate_hz`` and/or the time column,
+    and the table and channel names without the time column (a view, no copy)."""
     rate = None
     if "sample_rate_hz" in meta:
-        rate = _check_sample_rate(
-            _csv_float(meta["sample_rate_hz"][0], line_of("sample_rate_hz")),
-            line_of("sample_rate_hz"),
-        )
+        where = _csv_line_of(meta, "sample_rate_hz", display)
+        rate = _check_sample_rate(_csv_float(meta["sample_rate_hz"][0], where), where)
     if has_time:
         rate = _csv_time_rate(table[:, 0], rate, display)
         table = table[:, 1:]
@@ -190,13 +241,18 @@ def _read_csv_stream(p: Path, display: str, fh) -> Recording:
         raise RecordingError(
             f"{display}: no channels besides 'time'; expected 'force' and accelerations"
         )
+    return rate, table, names
+
+
+def _csv_excitation(meta, display: str) -> tuple[np.ndarray, np.ndarray | None]:
+    """``(excitation_direction, excitation_position_m or None)``, checked."""
     if "excitation_direction" not in meta:
         raise RecordingError(
             f"{display}: excitation_direction missing; expected a line such as '# excitation_direction: 0 -1 0'"
         )
     exc_dir = _check_vector(
         _csv_floats(*meta["excitation_direction"], display, "excitation_direction"),
-        line_of("excitation_direction"),
+        _csv_line_of(meta, "excitation_direction", display),
         "excitation_direction",
         True,
     )
@@ -204,26 +260,37 @@ def _read_csv_stream(p: Path, display: str, fh) -> Recording:
     if "excitation_position_m" in meta:
         exc_pos = _check_vector(
             _csv_floats(*meta["excitation_position_m"], display, "excitation_position_m"),
-            line_of("excitation_position_m"),
+            _csv_line_of(meta, "excitation_position_m", display),
             "excitation_position_m",
             False,
         )
-    n = len(names)
-    if "units" in meta:
-        units = [u for u in re.split(r"[\s,;]+", meta["units"][0]) if u]
-        if has_time and len(units) == n + 1:
-            if units[0] != "s":
-                raise RecordingError(
-                    f"{line_of('units')}: unit of 'time' is '{units[0]}'; expected 's'"
-                )
-            units = units[1:]
-        if len(units) != n:
-            raise RecordingError(
-                f"{line_of('units')}: {len(units)} units for {n} channels ({', '.join(names)})"
-            )
-    else:
-        units = ["N" if name == "force" else "m/s^2" for name in names]
+    return exc_dir, exc_pos
 
+
+def _csv_units(meta, names, has_time, display: str) -> list[str]:
+    """The unit of each channel: from ``units`` (a leading ``s`` of the time column dropped), else
+    N for ``force`` and m/s^2 for the rest."""
+    n = len(names)
+    if "units" not in meta:
+        return ["N" if name == "force" else "m/s^2" for name in names]
+    units = [u for u in re.split(r"[\s,;]+", meta["units"][0]) if u]
+    if has_time and len(units) == n + 1:
+        if units[0] != "s":
+            raise RecordingError(
+                f"{_csv_line_of(meta, 'units', display)}: unit of 'time' is '{units[0]}'; expected 's'"
+            )
+        units = units[1:]
+    if len(units) != n:
+        raise RecordingError(
+            f"{_csv_line_of(meta, 'units', display)}: {len(units)} units for {n} channels ({', '.join(names)})"
+        )
+    return units
+
+
+def _csv_channels(meta, names, units, exc_dir, exc_pos, guide, display: str):
+    """``(channels, force_index)``: the channels with their positions and directions, given or
+    the guide's defaults (:func:`default_channel_geometry`)."""
+    n = len(names)
     # names and units first, so their errors win over a missing default point
     placeholder = np.tile([1.0, 0.0, 0.0], (n, 1))
     _build_channels(display, tuple(names), tuple(units), placeholder, placeholder)
@@ -244,30 +311,7 @@ def _read_csv_stream(p: Path, display: str, fh) -> Recording:
         directions = _csv_floats(*meta["directions"], display, "directions", 3 * n).reshape(n, 3)
     else:
         directions = default_dir
-    channels, force_index = _build_channels(
-        display, tuple(names), tuple(units), positions, directions
-    )
-    pretrigger = None
-    if "pretrigger_samples" in meta:
-        value = _csv_float(meta["pretrigger_samples"][0], line_of("pretrigger_samples"))
-        pretrigger = _check_pretrigger(value, table.shape[0], line_of("pretrigger_samples"))
-    data = table  # (a view without the time column: no second copy of the samples)
-    data.setflags(write=False)
-    run = Run(
-        name=run_name,
-        sample_rate_hz=rate,
-        excitation_direction=_frozen_array(exc_dir),
-        excitation_position_m=None if exc_pos is None else _frozen_array(exc_pos),
-        channels=channels,
-        layout="signals",
-        n_samples=int(data.shape[0]),
-        n_hits_stored=0,
-        pretrigger_samples=pretrigger,
-        source=ArraySource(data),
-        force_index=force_index,
-        file=display,
-    )
-    return Recording(path=display, guide=guide, description=description, runs=(run,))
+    return _build_channels(display, tuple(names), tuple(units), positions, directions)
 
 
 def _csv_header(line: str, line_no: int, display: str) -> tuple[list[str], bool]:

@@ -472,6 +472,10 @@ def _check_virtual(ds, recording: Path, holder: str, where: str, depth: int) -> 
 
 
 def _read_hdf5_run(p: Path, display: str, root, runs_group, name: str) -> Run:
+    """The :class:`Run` ``name`` of the open recording ``root`` (``p`` its file, ``display`` its path
+    as given): attributes (:func:`_run_attributes`), the one data layout (:func:`_run_layout`), its
+    dataset (:func:`_check_run_dataset`), channels (:func:`_run_channels`) and a read probe. The
+    samples stay in the file (:class:`H5Source`)."""
     import h5py
 
     where = f"{display}: run '{name}'"
@@ -480,7 +484,39 @@ def _read_hdf5_run(p: Path, display: str, root, runs_group, name: str) -> Run:
         raise RecordingError(
             f"{where}: not a group; expected a group holding a 'signals' or 'hits' dataset"
         )
-    attrs = group.attrs
+    rate, exc_dir, exc_pos = _run_attributes(group.attrs, where)
+    layout = _run_layout(group, where)
+    access_path = f"/runs/{name}/{layout}"  # in the recording's own file: links are followed on every read
+    ds = _open_dataset(root, access_path)
+    _check_run_dataset(ds, p, where, layout)
+    dwhere = f"{where}: dataset '{layout}'"
+    channels, force_index = _run_channels(ds, where, dwhere)
+    pretrigger = None
+    if "pretrigger_samples" in ds.attrs:
+        pretrigger = _check_pretrigger(ds.attrs["pretrigger_samples"], ds.shape[-2], dwhere)
+    try:  # a cheap probe for data missing from a damaged file
+        ds[(0,) * (ds.ndim - 1)]
+        ds[tuple(s - 1 for s in ds.shape[:-1])]
+    except (OSError, RuntimeError, KeyError) as exc:
+        raise RecordingError(f"{dwhere}: samples cannot be read ({_first_line(exc)})") from None
+    return Run(
+        name=name,
+        sample_rate_hz=rate,
+        excitation_direction=_frozen_array(exc_dir),
+        excitation_position_m=None if exc_pos is None else _frozen_array(exc_pos),
+        channels=channels,
+        layout=layout,
+        n_samples=int(ds.shape[-2]),
+        n_hits_stored=int(ds.shape[0]) if layout == "hits" else 0,
+        pretrigger_samples=pretrigger,
+        source=H5Source(os.path.abspath(p), access_path, ds.dtype.str),
+        force_index=force_index,
+        file=display,
+    )
+
+
+def _run_attributes(attrs, where: str):
+    """``(sample_rate_hz, excitation_direction, excitation_position_m or None)`` of a run group."""
     if "sample_rate_hz" not in attrs:
         raise RecordingError(
             f"{where}: attribute 'sample_rate_hz' missing; expected the sampling rate in Hz"
@@ -496,6 +532,13 @@ def _read_hdf5_run(p: Path, display: str, root, runs_group, name: str) -> Run:
         exc_pos = _check_vector(
             attrs["excitation_position_m"], where, "excitation_position_m", False
         )
+    return rate, exc_dir, exc_pos
+
+
+def _run_layout(group, where: str) -> str:
+    """``"signals"`` or ``"hits"``: the run group's one data dataset."""
+    import h5py
+
     for key in LAYOUTS:
         _check_link(group, key, f"{where}: dataset '{key}'")
     present = [k for k in LAYOUTS if k in group]
@@ -509,8 +552,11 @@ def _read_hdf5_run(p: Path, display: str, root, runs_group, name: str) -> Run:
     layout = present[0]
     if group.get(layout, getclass=True) is not h5py.Dataset:
         raise RecordingError(f"{where}: '{layout}' is not a dataset")
-    access_path = f"/runs/{name}/{layout}"  # in the recording's own file: links are followed on every read
-    ds = _open_dataset(root, access_path)
+    return layout
+
+
+def _check_run_dataset(ds, p: Path, where: str, layout: str) -> None:
+    """The data dataset's storage, dtype (float, or integer counts with a scale) and shape."""
     _check_storage(ds, p, f"{where}: dataset '{layout}'")
     if ds.dtype.kind not in "fiu":
         raise RecordingError(
@@ -534,8 +580,12 @@ def _read_hdf5_run(p: Path, display: str, root, runs_group, name: str) -> Run:
         raise RecordingError(
             f"{where}: dataset '{layout}' has shape {ds.shape}; it holds no samples"
         )
+
+
+def _run_channels(ds, where: str, dwhere: str):
+    """``(channels, force_index)`` from the data dataset's channel attributes (names, units,
+    positions, directions; scaled when the samples are integer counts)."""
     n_channels = ds.shape[-1]
-    dwhere = f"{where}: dataset '{layout}'"
     texts = {}
     for attr in ("channel_names", "units"):
         if attr not in ds.attrs:
@@ -563,31 +613,8 @@ def _read_hdf5_run(p: Path, display: str, root, runs_group, name: str) -> Run:
         where, names, tuple(texts["units"]), tables["positions_m"], tables["directions"]
     )
     if SAMPLE_SCALE in ds.attrs:
-        channels = _scaled(channels, ds.attrs[SAMPLE_SCALE], f"{where}: dataset '{layout}'")
-    pretrigger = None
-    if "pretrigger_samples" in ds.attrs:
-        pretrigger = _check_pretrigger(ds.attrs["pretrigger_samples"], ds.shape[-2], dwhere)
-    try:  # a cheap probe for data missing from a damaged file
-        ds[(0,) * (ds.ndim - 1)]
-        ds[tuple(s - 1 for s in ds.shape[:-1])]
-    except (OSError, RuntimeError, KeyError) as exc:
-        raise RecordingError(f"{dwhere}: samples cannot be read ({_first_line(exc)})") from None
-    return Run(
-        name=name,
-        sample_rate_hz=rate,
-        excitation_direction=_frozen_array(exc_dir),
-        excitation_position_m=None if exc_pos is None else _frozen_array(exc_pos),
-        channels=channels,
-        layout=layout,
-        n_samples=int(ds.shape[-2]),
-        n_hits_stored=int(ds.shape[0]) if layout == "hits" else 0,
-        pretrigger_samples=pretrigger,
-        source=H5Source(os.path.abspath(p), access_path, ds.dtype.str),
-        force_index=force_index,
-        file=display,
-    )
-
-
+        channels = _scaled(channels, ds.attrs[SAMPLE_SCALE], dwhere)
+    return channels, force_index
 
 
 # --------------------------------------------------------------------- writing
@@ -852,39 +879,14 @@ def open_signals_writer(
     >>> run.n_samples, last.tolist()
     (300, [[2.0, 2.0]])
     """
-    import h5py
-
     display = os.fspath(path)
     p = Path(display)
-    if p.suffix.lower() not in SUFFIXES:
-        raise RecordingError(
-            f"{display}: open_signals_writer writes HDF5; expected a .h5 or .hdf5 path"
-        )
-    if not isinstance(run, RunData):
-        raise TypeError(f"run: expected RunData, got {type(run).__name__}")
-    if run.layout != "signals":
-        raise RecordingError(
-            f"{display}: run '{run.name}': layout '{run.layout}'; the writer writes 'signals'"
-        )
-    if mode not in ("w", "a"):
-        raise ValueError(f"mode={mode!r}: expected 'w' or 'a'")
+    _check_writer_arguments(display, p, run, mode)
     if dtype is None:
         dtype = np.float64 if run.data is None else run.data.dtype
     dtype = _file_dtype(dtype)
     target = p.with_name(p.name + ".part") if mode == "w" else p
-    if mode == "w":
-        f = h5py.File(target, "w")
-        _write_root(f, guide or None, description)
-        runs_group = f.create_group("runs", track_order=True)
-    else:
-        from guidefit.io.registry import read_recording
-
-        read_recording(p)  # must already be a valid recording
-        f = h5py.File(target, "r+")
-        runs_group = f["runs"]
-        if run.name in runs_group:
-            f.close()
-            raise RecordingError(f"{display}: run '{run.name}' already exists")
+    f, runs_group = _open_for_run(p, target, display, run, mode, guide, description)
     ok = False
     try:
         ds = _create_run(
@@ -904,21 +906,64 @@ def open_signals_writer(
             raise RecordingError(f"{display}: run '{run.name}': no samples were appended")
         ok = True
     finally:
-        if not ok and mode == "a":
-            with contextlib.suppress(Exception):
-                del runs_group[run.name]
-        try:
-            f.close()
-        except BaseException:
-            ok = False  # a close that fails (full disk) leaves an incomplete file
-            raise
-        finally:
-            if mode == "w":
-                if ok:
-                    os.replace(target, p)
-                else:
-                    with contextlib.suppress(OSError):
-                        target.unlink()
+        _close_written(f, runs_group, run.name, mode, target, p, ok)
+
+
+def _check_writer_arguments(display: str, p: Path, run, mode: str) -> None:
+    """:func:`open_signals_writer`'s path suffix, run header type and layout, and mode."""
+    if p.suffix.lower() not in SUFFIXES:
+        raise RecordingError(
+            f"{display}: open_signals_writer writes HDF5; expected a .h5 or .hdf5 path"
+        )
+    if not isinstance(run, RunData):
+        raise TypeError(f"run: expected RunData, got {type(run).__name__}")
+    if run.layout != "signals":
+        raise RecordingError(
+            f"{display}: run '{run.name}': layout '{run.layout}'; the writer writes 'signals'"
+        )
+    if mode not in ("w", "a"):
+        raise ValueError(f"mode={mode!r}: expected 'w' or 'a'")
+
+
+def _open_for_run(p: Path, target: Path, display: str, run, mode: str, guide, description):
+    """``(file, runs group)`` open for a new run: a new file ``target`` with the root attributes
+    (``mode="w"``), or the existing recording ``p``, checked first (``mode="a"``)."""
+    import h5py
+
+    if mode == "w":
+        f = h5py.File(target, "w")
+        _write_root(f, guide or None, description)
+        return f, f.create_group("runs", track_order=True)
+    from guidefit.io.registry import read_recording
+
+    read_recording(p)  # must already be a valid recording
+    f = h5py.File(target, "r+")
+    runs_group = f["runs"]
+    if run.name in runs_group:
+        f.close()
+        raise RecordingError(f"{display}: run '{run.name}' already exists")
+    return f, runs_group
+
+
+def _close_written(f, runs_group, name: str, mode: str, target: Path, p: Path, ok: bool) -> None:
+    """Close the file of :func:`open_signals_writer`; unless the run was written completely
+    (``ok``) and the file closed, remove the run (``mode="a"``) or the partial file (``"w"``),
+    else move the new file into place."""
+    if not ok and mode == "a":
+        with contextlib.suppress(Exception):
+            del runs_group[name]
+    try:
+        f.close()
+    except BaseException:
+        ok = False  # a close that fails (full disk) leaves an incomplete file
+        raise
+    finally:
+        if mode == "w":
+            if ok:
+                os.replace(target, p)
+            else:
+                with contextlib.suppress(OSError):
+                    target.unlink()
 
 
 FORMATS = (

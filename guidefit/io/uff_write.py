@@ -179,6 +179,17 @@ def write_frf_uff(path, frfsets, *, recording=None) -> None:
         raise RecordingError(f"{display}: no FRF sets to write")
     runs = _runs_by_name(recording)
     recording_guide = _guide_of(recording)
+    nodes = point_nodes(_point_names(display, items))
+    pyuff = _pyuff(display)
+    sets = [_units_set(pyuff)]
+    for i, frf in enumerate(items, start=1):
+        sets.extend(_run_sets(pyuff, f"{display}: run '{frf.run}'", REFERENCE_NODE_BASE + i, frf, runs,
+                              recording_guide, nodes))
+    _write_sets(display, sets)
+
+
+def _point_names(display: str, items) -> list[str]:
+    """The point of every response channel of the FRF sets (``acc_<point>_<axis>``), in order."""
     names = []
     for frf in items:
         for channel in frf.channels:
@@ -188,87 +199,79 @@ def write_frf_uff(path, frfsets, *, recording=None) -> None:
                     "UFF-58 needs a point and an axis"
                 )
             names.append(_ACC_RE.match(channel).group(1))
-    nodes = point_nodes(names)
-    pyuff = _pyuff(display)
-    sets = [_units_set(pyuff)]
-    frequency = (SPEC_FREQUENCY, "Frequency", "Hz")
-    for i, frf in enumerate(items, start=1):
-        where = f"{display}: run '{frf.run}'"
-        f = np.asarray(frf.frequency_hz, dtype=np.float64).reshape(-1)
-        H = np.asarray(frf.H)
-        coh = np.asarray(frf.coherence)
-        shape = (f.size, len(frf.channels))
-        if H.shape != shape or coh.shape != shape:
+    return names
+
+
+def _run_sets(pyuff, where: str, ref_node: int, frf, runs, recording_guide, nodes) -> list:
+    """The UFF-58 datasets of one FRF set: an FRF and a coherence per response channel, the
+    reference ``ref_node`` and, with the recording's ``runs``, the measured directions."""
+    f = np.asarray(frf.frequency_hz, dtype=np.float64).reshape(-1)
+    H = np.asarray(frf.H)
+    coh = np.asarray(frf.coherence)
+    shape = (f.size, len(frf.channels))
+    if H.shape != shape or coh.shape != shape:
+        raise RecordingError(
+            f"{where}: H {H.shape} and coherence {coh.shape}; expected {shape} "
+            "(frequencies, channels)"
+        )
+    spacing = _even_spacing(f, where)
+    run = None
+    if runs is not None:
+        run = runs.get(frf.run)
+        if run is None:
             raise RecordingError(
-                f"{where}: H {H.shape} and coherence {coh.shape}; expected {shape} "
-                "(frequencies, channels)"
+                f"{where}: the recording has no run of that name; have {', '.join(runs)}"
             )
-        spacing = _even_spacing(f, where)
-        run = None
-        if runs is not None:
-            run = runs.get(frf.run)
-            if run is None:
-                raise RecordingError(
-                    f"{where}: the recording has no run of that name; have {', '.join(runs)}"
-                )
-        ref = (REFERENCE_NODE_BASE + i, 0)
+    ref = (ref_node, 0)
+    if run is not None:
+        ref = (
+            ref[0],
+            direction_code(run.excitation_direction, None, f"{where}: excitation_direction"),
+        )
+    provenance = _provenance(
+        estimator=frf.estimator,
+        n_averages=frf.n_averages,
+        sample_rate_hz=getattr(frf, "sample_rate_hz", None),
+    )
+    tau = getattr(frf, "exp_window_tau_s", None)
+    windows = _provenance(
+        exp_window_tau_s="none" if tau is None else f"{tau:.12g}",
+        guide=None if recording_guide is None else recording_guide,
+    )
+    sets = []
+    for k, channel in enumerate(frf.channels):
+        point, axis = _ACC_RE.match(channel).groups()
+        code = _AXIS_CODES[axis]
         if run is not None:
-            ref = (
-                ref[0],
-                direction_code(run.excitation_direction, None, f"{where}: excitation_direction"),
+            if channel not in run.channel_names:
+                raise RecordingError(f"{where}: channel '{channel}' not in the recording's run")
+            sensor = run.channels[run.channel_names.index(channel)]
+            code = direction_code(sensor.direction, axis, f"{where}: channel '{channel}'")
+        common = {"rsp": (nodes[point], code), "ref": ref, "x": f, "spacing": spacing,
+                  "abscissa": (SPEC_FREQUENCY, "Frequency", "Hz"), "id4": windows}
+        sets.append(
+            _set58(
+                pyuff,
+                func_type=FUNCTION_FRF,
+                ids=(f"{frf.estimator} {channel}/force", frf.run, provenance),
+                data=H[:, k].astype(np.complex128),
+                ordinate=(SPEC_ACCELERATION, "Accelerance", "m/s^2"),
+                denominator=(SPEC_FORCE, "Force", "N"),
+                **common,
             )
-        provenance = _provenance(
-            estimator=frf.estimator,
-            n_averages=frf.n_averages,
-            sample_rate_hz=getattr(frf, "sample_rate_hz", None),
         )
-        tau = getattr(frf, "exp_window_tau_s", None)
-        windows = _provenance(
-            exp_window_tau_s="none" if tau is None else f"{tau:.12g}",
-            guide=None if recording_guide is None else recording_guide,
+        sets.append(
+            _set58(
+                pyuff,
+                func_type=FUNCTION_COHERENCE,
+                ids=(f"coherence {channel}/force", frf.run, provenance),
+                data=coh[:, k].real.astype(np.float64),
+                ordinate=(SPEC_GENERAL, "Coherence", "NONE"),
+                denominator=(SPEC_UNKNOWN, "NONE", "NONE"),
+                **common,
+            )
         )
-        for k, channel in enumerate(frf.channels):
-            point, axis = _ACC_RE.match(channel).groups()
-            code = _AXIS_CODES[axis]
-            if run is not None:
-                if channel not in run.channel_names:
-                    raise RecordingError(f"{where}: channel '{channel}' not in the recording's run")
-                sensor = run.channels[run.channel_names.index(channel)]
-                code = direction_code(sensor.direction, axis, f"{where}: channel '{channel}'")
-            rsp = (nodes[point], code)
-            sets.append(
-                _set58(
-                    pyuff,
-                    func_type=FUNCTION_FRF,
-                    ids=(f"{frf.estimator} {channel}/force", frf.run, provenance),
-                    rsp=rsp,
-                    ref=ref,
-                    x=f,
-                    data=H[:, k].astype(np.complex128),
-                    spacing=spacing,
-                    abscissa=frequency,
-                    ordinate=(SPEC_ACCELERATION, "Accelerance", "m/s^2"),
-                    denominator=(SPEC_FORCE, "Force", "N"),
-                    id4=windows,
-                )
-            )
-            sets.append(
-                _set58(
-                    pyuff,
-                    func_type=FUNCTION_COHERENCE,
-                    ids=(f"coherence {channel}/force", frf.run, provenance),
-                    rsp=rsp,
-                    ref=ref,
-                    x=f,
-                    data=coh[:, k].real.astype(np.float64),
-                    spacing=spacing,
-                    abscissa=frequency,
-                    ordinate=(SPEC_GENERAL, "Coherence", "NONE"),
-                    denominator=(SPEC_UNKNOWN, "NONE", "NONE"),
-                    id4=windows,
-                )
-            )
-    _write_sets(display, sets)
+    return sets
 
 
 def _guide_of(recording) -> str | None:

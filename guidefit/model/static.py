@@ -418,48 +418,9 @@ def load_at_displacement(guide, displacement_q, calibration: str = "nominal") ->
     return -(g.T @ roller_force(guide.preload_m - g @ q, guide, calibration))
 
 
-def solve_equilibrium(guide, load, calibration: str = "nominal") -> Equilibrium:
-    """Displacement of the carriage under a static load: Eq. (1) by damped Newton.
-
-    Solves ``f + sum_i Q_i(Delta - g_i . q) g_i = 0`` from ``q = 0`` with the
-    analytic Jacobian ``sum_i K_n,i g_i g_i^T`` (Eq. 2). Each step is a Newton
-    step (lightly regularised where rows have lifted off) shortened by an Armijo
-    line search on the convex potential ``sum_i W(delta_i) - f . q``, so it
-    converges for every load the rollers can carry; it stops at a residual of
-    1e-11 relative to the gross roller forces in each coordinate.
-
-    Parameters
-    ----------
-    guide : Guide
-    load : sequence of 3 or 5 floats
-        ``(F_V, F_H, M_gamma)`` in N, N, N m (F_V positive pressing the carriage
-        onto the rail) or the generalised forces (see :func:`load_vector`).
-    calibration : {"nominal", "law"}
-
-    Returns
-    -------
-    Equilibrium
-
-    Raises
-    ------
-    ModelError
-        One line naming the load: a load component no roller can resist, a
-        roller load beyond :func:`roller_capacity_n`, or no convergence.
-
-    Examples
-    --------
-    >>> from guidefit.model.guides import load_guide
-    >>> eq = solve_equilibrium(load_guide("MRB35"), (2000.0, 0.0, 0.0))
-    >>> eq.rows_lifted, round(float(-eq.displacement_q[1]) * 1e6, 3)
-    ((3, 4), 2.556)
-    """
-    f = load_vector(load)
-    c = contact_constant(guide, calibration)
-    what = _describe(load)
-    g, rows = _gradients(guide)
-    delta0 = guide.preload_m
-    capacity = roller_capacity_n(guide)
-
+def _check_carried(g, f, capacity, what: str) -> None:
+    """A :class:`ModelError` when the generalised load ``f`` has a component no roller can resist
+    or one beyond what all rollers at ``capacity`` (N, or None) could give."""
     # components of f that no combination of roller forces can balance: f . v for v in null(G),
     # in coordinates scaled by each column's rms lever arm so that N and N m compare
     arm = np.sqrt(np.mean(g**2, axis=0))
@@ -480,7 +441,10 @@ def solve_equilibrium(guide, load, calibration: str = "nominal") -> Equilibrium:
                 f"|{f[j]:.4g}| > {reach[j]:.4g} with every roller at {capacity:.4g} N)"
             )
 
-    e = exponent(guide)
+
+def _newton(g, f, c, e, delta0, what: str) -> tuple[np.ndarray, float, int]:
+    """Eq. (1) by damped Newton from ``q = 0`` (see :func:`solve_equilibrium`): ``(q, residual_rel,
+    iterations)``; a :class:`ModelError` when the line search fails or the displacement diverges."""
     w_coef = c / (e + 1.0)
 
     def potential(q):
@@ -524,6 +488,66 @@ def solve_equilibrium(guide, load, calibration: str = "nominal") -> Equilibrium:
         q = q + t * dq
         if not np.all(np.isfinite(q)) or np.max(np.abs(q)) > 1.0:
             raise ModelError(f"{what}: no static equilibrium found (displacement diverges); the contacts cannot carry it")
+    return q, residual_rel, iterations
+
+
+def _rows_off(a, rows) -> tuple[list[int], list[int]]:
+    """The rows (1-4) whose rollers have all lifted off (approach ``a <= 0``), and those partly."""
+    lifted, partial = [], []
+    for row in range(1, 5):
+        off = a[rows == row] <= 0.0
+        if np.all(off):
+            lifted.append(row)
+        elif np.any(off):
+            partial.append(row)
+    return lifted, partial
+
+
+def solve_equilibrium(guide, load, calibration: str = "nominal") -> Equilibrium:
+    """Displacement of the carriage under a static load: Eq. (1) by damped Newton.
+
+    Solves ``f + sum_i Q_i(Delta - g_i . q) g_i = 0`` from ``q = 0`` with the
+    analytic Jacobian ``sum_i K_n,i g_i g_i^T`` (Eq. 2). Each step is a Newton
+    step (lightly regularised where rows have lifted off) shortened by an Armijo
+    line search on the convex potential ``sum_i W(delta_i) - f . q``, so it
+    converges for every load the rollers can carry; it stops at a residual of
+    1e-11 relative to the gross roller forces in each coordinate.
+
+    Parameters
+    ----------
+    guide : Guide
+    load : sequence of 3 or 5 floats
+        ``(F_V, F_H, M_gamma)`` in N, N, N m (F_V positive pressing the carriage
+        onto the rail) or the generalised forces (see :func:`load_vector`).
+    calibration : {"nominal", "law"}
+
+    Returns
+    -------
+    Equilibrium
+
+    Raises
+    ------
+    ModelError
+        One line naming the load: a load component no roller can resist, a
+        roller load beyond :func:`roller_capacity_n`, or no convergence.
+
+    Examples
+    --------
+    >>> from guidefit.model.guides import load_guide
+    >>> eq = solve_equilibrium(load_guide("MRB35"), (2000.0, 0.0, 0.0))
+    >>> eq.rows_lifted, round(float(-eq.displacement_q[1]) * 1e6, 3)
+    ((3, 4), 2.556)
+    """
+    f = load_vector(load)
+    c = contact_constant(guide, calibration)
+    what = _describe(load)
+    g, rows = _gradients(guide)
+    delta0 = guide.preload_m
+    capacity = roller_capacity_n(guide)
+
+    _check_carried(g, f, capacity, what)
+    e = exponent(guide)
+    q, residual_rel, iterations = _newton(g, f, c, e, delta0, what)
     if residual_rel >= _TOL * 100:
         raise ModelError(
             f"{what}: no static equilibrium found (Newton stopped at residual {residual_rel:.2g} "
@@ -537,13 +561,7 @@ def solve_equilibrium(guide, load, calibration: str = "nominal") -> Equilibrium:
             f"{what}: exceeds the static capacity of the contacts (roller load {load_i[i]:.4g} N in row "
             f"{rows[i]} > {capacity:.4g} N at {4200 if getattr(guide, 'is_ball', False) else 4000} MPa contact stress)"
         )
-    lifted, partial = [], []
-    for row in range(1, 5):
-        off = a[rows == row] <= 0.0
-        if np.all(off):
-            lifted.append(row)
-        elif np.any(off):
-            partial.append(row)
+    lifted, partial = _rows_off(a, rows)
     return Equilibrium(
         guide_name=guide.name,
         calibration=calibration,
