@@ -469,21 +469,16 @@ def _failed_json(path, guide_name, code, error, details=()) -> dict:
 def _map_files(files, guide_name, settings, jobs, console, keep_frfs=True):
     """Yield (path, (code, result, error, details)) in input order, in parallel when jobs > 1, with a
     progress bar; without ``keep_frfs`` the workers send their results without the FRF arrays."""
-    from guidefit import report
+    from guidefit.progress import progress_bar
 
-    progress = report.file_progress(len(files), console) if len(files) > 1 else None
-    try:
+    with progress_bar("files", len(files), enabled=len(files) > 1, console=console) as progress:
         if jobs == 1 or len(files) == 1:
             for path in files:
                 outcome = _identify_one(path, guide_name, settings)
-                if progress:
-                    progress.advance()
+                progress.advance()
                 yield path, outcome
             return
         yield from _pool_map(files, guide_name, settings, jobs, progress, keep_frfs)
-    finally:
-        if progress:
-            progress.close()
 
 
 def _pool_map(files, guide_name, settings, jobs, progress, keep_frfs=True):
@@ -511,8 +506,7 @@ def _pool_map(files, guide_name, settings, jobs, progress, keep_frfs=True):
             signal.pthread_sigmask(signal.SIG_SETMASK, old)
         for path, future in zip(files, futures):
             outcome = future.result()
-            if progress:
-                progress.advance()
+            progress.advance()
             yield path, outcome
         done = True
     finally:
@@ -608,6 +602,7 @@ def explain_cmd(recording, modes_path, guide_name, candidates, as_json, plot_pat
     """
     from guidefit import report
     from guidefit.explain import explain
+    from guidefit.progress import progress_bar
 
     if (recording is None) == (modes_path is None):
         raise click.UsageError("give a RECORDING or --modes FILE (one of them)")
@@ -619,7 +614,7 @@ def explain_cmd(recording, modes_path, guide_name, candidates, as_json, plot_pat
     from guidefit.errors import GuideError
 
     ident = result = None
-    with report.spinner("explaining", enabled=not as_json) as progress:
+    with progress_bar("explaining", enabled=not as_json) as progress:
         try:
             if recording is not None:  # explain(recording) in two steps: the plot shows this identification
                 from guidefit.explain import identify_for_explain
@@ -691,11 +686,11 @@ def _id_list(text: str | None, option: str):
 def export_cmd(results, fmt, joint, explain_paths, guide_name, element, units, axis_map, carriage_nodes,
                rail_nodes, first_element, id_step, n_vertical, n_horizontal, assembly, rot_offset, out_path):
     """Joints for a machine FEM model: 6x6 stiffness and damping per carriage (paper Fig. 10)."""
-    from guidefit import report
     from guidefit.export import export
+    from guidefit.progress import progress_bar
 
     _refuse([out_path], [results, *explain_paths, _guide_file(guide_name)])
-    with report.spinner("explaining carriages", enabled=joint == "explained") as progress:
+    with progress_bar("explaining carriages", enabled=joint == "explained") as progress:
         text = export(results, fmt, joint=joint, explanations=explain_paths, guide=guide_name, element=element,
                       units=units, axis_map=axis_map, carriage_nodes=_id_list(carriage_nodes, "--carriage-node"),
                       rail_nodes=_id_list(rail_nodes, "--rail-node"), first_element=first_element,
@@ -775,10 +770,10 @@ def update_cmd(deck, measured, params, point_map, freq_std, units, jobs, ccx, ma
     import json
     from pathlib import Path
 
-    from guidefit import report
     from guidefit import update as upd
     from guidefit.ccx_deck import find_ccx, load_deck
     from guidefit.outputs import write_text
+    from guidefit.progress import progress_bar
 
     loaded = load_deck(deck)
     if units and units != loaded.units:
@@ -791,16 +786,9 @@ def update_cmd(deck, measured, params, point_map, freq_std, units, jobs, ccx, ma
     outs = {jf.path: folder / f"{jf.path.stem}.updated.inp" for jf in loaded.joint_files}
     _refuse(list(outs.values()), [deck, measured, point_map, *loaded.files])
     find_ccx(ccx)
-    with report.spinner("ccx runs") as bar:
-        count = [0]
-
-        def advance():
-            count[0] += 1
-            if bar is not None:
-                bar(count[0], None)
-
+    with progress_bar("ccx runs") as bar:
         result = upd.update(deck, measured, params, point_map_path=point_map, freq_std_pct=freq_std, jobs=jobs,
-                            ccx=ccx, progress=advance, max_iterations=max_iterations)
+                            ccx=ccx, progress=bar.advance, max_iterations=max_iterations)
     texts = upd.updated_texts(result, (Path(deck).name, Path(measured).name))
     for path, text in texts.items():
         write_text(outs[path], text)
@@ -831,12 +819,12 @@ def report_cmd(recording, out_path, guide_name, candidates, estimator, no_jackkn
     RECORDING is a recording (.h5, .csv, .uff, frf.h5) or a test setup (.toml) of your own DAQ
     files (docs/recordings.md, "Your own DAQ files: quick start").
     """
-    from guidefit import report
     from guidefit.html_report import write_report
+    from guidefit.progress import progress_bar
 
     _refuse([out_path], [recording, _guide_file(guide_name)])
     settings = _identify_settings(estimator, no_jackknife, fft_precision)
-    with report.spinner("identifying and explaining") as progress:
+    with progress_bar("identifying and explaining") as progress:
         results = write_report(recording, out_path, guide=guide_name, settings=settings,
                                candidates=_candidate_names(candidates), progress=progress)
     click.echo(f"report written to {out_path}")

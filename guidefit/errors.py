@@ -3,8 +3,32 @@
 Every error that reaches the command line is a :class:`GuidefitError`; its
 message is one line that names the file or field at fault, and its
 ``exit_code`` is what the CLI returns (2 bad input or usage, 1 a check or an
-identification that failed on valid input). The input errors also subclass
-:class:`ValueError` so library users can catch them as such.
+identification that failed on valid input). Every one also subclasses a
+builtin, so library users can catch it as such: every input error is a
+:class:`ValueError`, :class:`IdentificationError` a :class:`RuntimeError`.
+
+The classes live here, or beside the module that owns their concept; every one
+is in this table (``tests/test_errors.py`` checks it, and that each subclasses
+:class:`GuidefitError` and a builtin):
+
+=======================  ===========================  ==========================  ====
+class                    home                         bases                       exit
+=======================  ===========================  ==========================  ====
+``GuidefitError``        ``guidefit.errors``          ``Exception``               2
+``GuideError``           ``guidefit.errors``          ``ValueError``              2
+``RecordingError``       ``guidefit.errors``          ``ValueError``              2
+``ModelError``           ``guidefit.errors``          ``ValueError``              2
+``IdentificationError``  ``guidefit.errors``          ``RuntimeError``            1
+``CheckSpecError``       ``guidefit.check``           ``GuideError``              2
+``HitSettingsError``     ``guidefit.hits``            ``ValueError``              2
+``OutputError``          ``guidefit.outputs``         ``ValueError``              2
+``ExportError``          ``guidefit.export.core``     ``ValueError``              2
+``DeckError``            ``guidefit.ccx_deck``        ``ValueError``              2
+``UpdateError``          ``guidefit.update``          ``DeckError``               2
+``CorrelateError``       ``guidefit.correlate``       ``ValueError``              2
+``SetupError``           ``guidefit.io.setup``        ``RecordingError``          2
+``FEResultError``        ``guidefit.io.fe_results``   ``ValueError``              2
+=======================  ===========================  ==========================  ====
 """
 
 
@@ -41,7 +65,7 @@ class ModelError(GuidefitError, ValueError):
     """The model cannot be evaluated for the given inputs (e.g. load beyond capacity)."""
 
 
-class IdentificationError(GuidefitError):
+class IdentificationError(GuidefitError, RuntimeError):
     """Valid input, but no result can be trusted (no mode found, all hits rejected)."""
 
     exit_code = 1

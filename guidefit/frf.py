@@ -1,8 +1,13 @@
 r"""Frequency response functions of impact-hammer hits: windows, H1/H2/Hv, coherence.
 
 The windows are in :mod:`guidefit.windows`, the streaming FFT engine that
-makes the spectral sums in :mod:`guidefit.spectra`; their names are
-importable from here as well (this module is the FRF stage's entrance).
+makes the spectral sums in :mod:`guidefit.spectra`, the :class:`FrfSet` data
+type and its estimator formulas in :mod:`guidefit.frfset`; their names are
+importable from here as well (this module is the FRF stage's entrance). FRF
+files (``frf.csv``, ``frf.h5``) are written and read in
+:mod:`guidefit.io.frf_files`; :func:`write_frf_csv`, :func:`write_frf_h5` and
+:func:`read_frf_h5` are importable from here too, their documented old home.
+This module does no file I/O.
 
 Every accepted hit is one record of ``n_samples`` samples of all channels, the
 force channel plus R response (acceleration) channels. Each record is windowed,
@@ -129,11 +134,24 @@ from __future__ import annotations
 import math
 from collections import Counter
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass
 
 import numpy as np
 
 from guidefit.errors import IdentificationError
+from guidefit.frfset import (  # (re-exported: the FrfSet type and its estimators, importable from here)
+    ESTIMATORS,
+    FrfSet,
+    _check_estimator,
+    _frfset_from_sums,
+    coherence_from_sums,
+    estimate_frf,
+)
+from guidefit.io.frf_files import (  # (re-exported: the documented FRF file functions' old home)
+    read_frf_h5,
+    write_frf_csv,
+    write_frf_h5,
+)
 from guidefit.spectra import (  # noqa: F401  (re-exported: the FRF engine's names, importable from here)
     DEFAULT_GROUPS,
     PAIR_HITS_PER_GROUP,
@@ -187,260 +205,6 @@ __all__ = [
     "write_frf_csv",
     "write_frf_h5",
 ]
-
-# --------------------------------------------------------------------------- estimators
-
-
-def _h1(sff, sxx, sfx):
-    return sfx / sff[..., None]
-
-
-def _h2(sff, sxx, sfx):
-    return sxx / np.conj(sfx)
-
-
-def _hv(sff, sxx, sfx):
-    # H = Sfx / (Sff - lam_min); Sff - lam_min = d + r with d = (Sff - Sxx)/2,
-    # r = sqrt(d^2 + |Sfx|^2). For d < 0 use the cancellation-free d + r = |Sfx|^2/(r - d).
-    d = 0.5 * (sff[..., None] - sxx)
-    b2 = sfx.real**2 + sfx.imag**2
-    r = np.sqrt(d * d + b2)
-    denom = np.where(d >= 0, d + r, b2 / np.where(d >= 0, 1.0, r - d))
-    return sfx / denom
-
-
-#: The FRF estimators by name; each maps (Sff (..., F), Sxx (..., F, R), Sfx) -> H.
-ESTIMATORS: dict[str, Callable] = {"H1": _h1, "H2": _h2, "Hv": _hv}
-
-
-def _check_estimator(estimator: str) -> str:
-    if estimator not in ESTIMATORS:
-        raise ValueError(
-            f"estimator {estimator!r} unknown; use one of {', '.join(ESTIMATORS)}"
-        )
-    return estimator
-
-
-def estimate_frf(sff, sxx, sfx, estimator: str = "H1") -> np.ndarray:
-    """FRF estimate per response channel from spectral sums.
-
-    Parameters
-    ----------
-    sff : array_like, shape (F,)
-        Force auto-spectrum (real, any common scale).
-    sxx : array_like, shape (F, R)
-        Response auto-spectra (real).
-    sfx : array_like, shape (F, R)
-        Cross-spectra :math:`\\sum \\overline{F} X` (complex).
-    estimator : {"H1", "H2", "Hv"}
-        See the module docstring.
-
-    Returns
-    -------
-    numpy.ndarray, shape (F, R), complex
-        NaN where the estimator is undefined (a zero denominator).
-
-    Examples
-    --------
-    One bin, force spectrum 2, response 6j plus uncorrelated response noise
-    (power 4); the true H is 3j:
-
-    >>> import numpy as np
-    >>> sff = np.array([4.0]); sxx = np.array([[36.0 + 4.0]]); sfx = np.array([[2 * 6j]])
-    >>> [round(float(estimate_frf(sff, sxx, sfx, e)[0, 0].imag), 4) for e in ESTIMATORS]
-    [3.0, 3.3333, 3.3028]
-    """
-    fn = ESTIMATORS[_check_estimator(estimator)]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return fn(np.asarray(sff, dtype=float), np.asarray(sxx, dtype=float),
-                  np.asarray(sfx, dtype=complex))
-
-
-def coherence_from_sums(sff, sxx, sfx) -> np.ndarray:
-    """Ordinary coherence :math:`|S_{fx}|^2 / (S_{ff} S_{xx})`, clipped to [0, 1].
-
-    Parameters
-    ----------
-    sff, sxx, sfx : array_like
-        As in :func:`estimate_frf`.
-
-    Returns
-    -------
-    numpy.ndarray, shape (F, R), float
-        NaN where :math:`S_{ff} S_{xx} = 0`.
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> float(coherence_from_sums(np.array([4.0]), np.array([[40.0]]), np.array([[12j]]))[0, 0])
-    0.9
-    """
-    sff = np.asarray(sff, dtype=float)
-    sxx = np.asarray(sxx, dtype=float)
-    sfx = np.asarray(sfx, dtype=complex)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        g2 = (sfx.real**2 + sfx.imag**2) / (sff[..., None] * sxx)
-    return np.clip(g2, 0.0, 1.0)
-
-
-# --------------------------------------------------------------------------- FrfSet
-
-
-@dataclass(frozen=True, eq=False)
-class FrfSet:
-    """Averaged FRFs of every response channel of one run.
-
-    Attributes
-    ----------
-    run : str
-        Run name.
-    frequency_hz : numpy.ndarray, shape (F,)
-        Bin frequencies, ``scipy.fft.rfftfreq(n_samples, 1/fs)``.
-    channels : tuple of str
-        Response channel names, in the order of the columns of ``H``.
-    H : numpy.ndarray, shape (F, R), complex
-        Accelerance in (m/s^2)/N from ``estimator``; with an exponential window
-        it is the FRF of the system with extra damping 1/tau (module docstring).
-    coherence : numpy.ndarray, shape (F, R)
-        Ordinary coherence in [0, 1].
-    estimator : str
-        ``"H1"``, ``"H2"`` or ``"Hv"``.
-    n_averages : int
-        Hits averaged.
-    group_sums : dict
-        ``Sff`` (G, F), ``Sxx`` (G, F, R), ``Sfx`` (G, F, R), ``n_hits`` (G,):
-        see :func:`spectral_sums`.
-    exp_window_tau_s : float or None
-        Exponential-window time constant (``None``: no exponential window).
-    force_window_s : float or None
-        Flat force-window width after the trigger (``None``: no force window).
-    force_taper_s : float or None
-        Force-window taper length.
-    trigger_s : float or None
-        Time of the trigger from the record start.
-    sample_rate_hz : float or None
-        Sample rate of the records.
-    fft_precision : str
-        ``"single"`` (float32 FFTs, float64 sums) or ``"double"``; see
-        "Precision" in the module docstring.
-    """
-
-    run: str
-    frequency_hz: np.ndarray
-    channels: tuple[str, ...]
-    H: np.ndarray
-    coherence: np.ndarray
-    estimator: str
-    n_averages: int
-    group_sums: dict = field(repr=False)
-    exp_window_tau_s: float | None
-    force_window_s: float | None
-    force_taper_s: float | None = None
-    trigger_s: float | None = None
-    sample_rate_hz: float | None = None
-    fft_precision: str = "double"
-
-    @property
-    def n_groups(self) -> int:
-        """Number of jackknife groups G (0 when the group sums were not kept)."""
-        if not self.group_sums:
-            return 0
-        return int(np.asarray(self.group_sums["Sff"]).shape[0])
-
-    def _need_groups(self, what: str, minimum: int) -> None:
-        if self.n_groups < minimum:
-            raise ValueError(
-                f"run '{self.run}': {what} needs group sums of >= {minimum} groups, "
-                f"this FrfSet has {self.n_groups}"
-            )
-
-    @property
-    def H_std(self) -> np.ndarray:
-        """Approximate standard deviation of :math:`|H|` per bin, (F, R).
-
-        Bendat and Piersol's normalised random error of a gain factor,
-        :math:`\\varepsilon = \\sqrt{1-\\gamma^2} / (|\\gamma| \\sqrt{2 n_{avg}})`,
-        times :math:`|H|`. Zero when :math:`\\gamma^2 = 1` (always so for one hit,
-        where it means nothing); use :func:`jackknife_frf` for derived quantities.
-        """
-        g2 = self.coherence
-        with np.errstate(divide="ignore", invalid="ignore"):
-            eps = np.sqrt(1.0 - g2) / (np.sqrt(g2) * math.sqrt(2.0 * self.n_averages))
-        return eps * np.abs(self.H)
-
-    def with_estimator(self, estimator: str) -> FrfSet:
-        """The same averages with another estimator (``"H1"``, ``"H2"``, ``"Hv"``).
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> f = np.zeros((4, 16)); f[:, 1] = [1.0, 2.0, 3.0, 4.0]
-        >>> rec = np.stack([f, 3 * f + 0.1 * np.random.default_rng(1).normal(size=f.shape)], -1)
-        >>> h1 = frf_from_records(rec, 100.0, window=WindowSettings(none=True))
-        >>> h2 = h1.with_estimator("H2")
-        >>> bool(np.all(np.abs(h1.H) <= np.abs(h2.H) + 1e-12))
-        True
-        """
-        self._need_groups("with_estimator", 1)
-        return _frfset_from_sums(self, self.group_sums, estimator)
-
-    def leave_one_group_out(self) -> Iterator[FrfSet]:
-        """FrfSets of the hits without group g, for g = 0 .. G-1.
-
-        The delete-a-group jackknife replicates; see :func:`jackknife_frf`.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> rng = np.random.default_rng(2)
-        >>> rec = rng.normal(size=(5, 32, 2))
-        >>> frf = frf_from_records(rec, 100.0, window=WindowSettings(none=True), n_groups=3)
-        >>> [r.n_averages for r in frf.leave_one_group_out()]
-        [3, 3, 4]
-        """
-        self._need_groups("leave_one_group_out", 2)
-        gs = self.group_sums
-        tot = {k: np.sum(gs[k], axis=0) for k in ("Sff", "Sxx", "Sfx", "n_hits")}
-        for g in range(self.n_groups):
-            sub = {k: tot[k] - gs[k][g] for k in tot}
-            sums = {k: np.delete(np.asarray(gs[k]), g, axis=0) for k in gs}
-            yield _frfset_from_sums(self, sums, self.estimator, totals=sub)
-
-    def to_frame(self):
-        """pandas DataFrame: ``frequency_hz``, then ``<channel>_re``, ``_im``, ``_coherence``.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> rec = np.random.default_rng(3).normal(size=(2, 8, 2))
-        >>> frf = frf_from_records(rec, 8.0, channel_names=("force", "acc_A_y"))
-        >>> list(frf.to_frame().columns)
-        ['frequency_hz', 'acc_A_y_re', 'acc_A_y_im', 'acc_A_y_coherence']
-        """
-        import pandas as pd
-
-        return pd.DataFrame(_columns(self))
-
-
-def _columns(frf: FrfSet) -> dict:
-    cols = {"frequency_hz": np.asarray(frf.frequency_hz)}
-    for k, name in enumerate(frf.channels):
-        cols[f"{name}_re"] = frf.H[:, k].real
-        cols[f"{name}_im"] = frf.H[:, k].imag
-        cols[f"{name}_coherence"] = frf.coherence[:, k]
-    return cols
-
-
-def _frfset_from_sums(template: FrfSet, sums: dict, estimator: str,
-                      totals: dict | None = None) -> FrfSet:
-    _check_estimator(estimator)
-    if totals is None:
-        totals = {k: np.sum(sums[k], axis=0) for k in ("Sff", "Sxx", "Sfx", "n_hits")}
-    H = estimate_frf(totals["Sff"], totals["Sxx"], totals["Sfx"], estimator)
-    coh = coherence_from_sums(totals["Sff"], totals["Sxx"], totals["Sfx"])
-    return replace(template, H=_readonly(H), coherence=_readonly(coh), estimator=estimator,
-                   n_averages=int(totals["n_hits"]), group_sums=sums)
-
 
 # --------------------------------------------------------------------------- entrances
 
@@ -760,184 +524,3 @@ def jackknife_frf(frfset: FrfSet, fn: Callable[[FrfSet], object]) -> JackknifeRe
     estimate = np.sum(theta - reps, axis=0) + np.sum(mg * reps, axis=0) / n
     var = np.sum((pseudo - estimate) ** 2 / (h - 1.0), axis=0) / G
     return JackknifeResult(theta[()], np.sqrt(var)[()], estimate[()], pseudo, reps, m)
-
-
-# --------------------------------------------------------------------------- export
-
-
-def _as_list(frfsets) -> list[FrfSet]:
-    items = [frfsets] if isinstance(frfsets, FrfSet) else list(frfsets)
-    if not items:
-        raise ValueError("frfsets is empty; need at least one FrfSet")
-    return items
-
-
-def write_frf_csv(path, frfsets) -> None:
-    """Write FRFs as CSV: ``frequency_hz``, then ``<channel>_re``, ``_im``, ``_coherence``.
-
-    One row per frequency bin and run. With several runs a first column ``run``
-    is added and the rows of each run follow one another; a channel missing
-    from a run leaves its cells empty. Numbers are written in Python's shortest
-    round-trip form (``repr``: lossless; ``nan`` where undefined).
-
-    Parameters
-    ----------
-    path : str or path-like
-        Output file.
-    frfsets : FrfSet or sequence of FrfSet
-
-    Examples
-    --------
-    >>> import numpy as np, tempfile, os
-    >>> rec = np.random.default_rng(5).normal(size=(2, 8, 2))
-    >>> frf = frf_from_records(rec, 8.0, channel_names=("force", "acc_A_y"))
-    >>> path = os.path.join(tempfile.mkdtemp(), "frf.csv")
-    >>> write_frf_csv(path, frf)
-    >>> open(path).readline().strip()
-    'frequency_hz,acc_A_y_re,acc_A_y_im,acc_A_y_coherence'
-    """
-    items = _as_list(frfsets)
-    channels: list[str] = []
-    for frf in items:
-        channels += [c for c in frf.channels if c not in channels]
-    header = ["frequency_hz"] + [f"{c}_{part}" for c in channels
-                                 for part in ("re", "im", "coherence")]
-    multi = len(items) > 1
-    if multi:
-        header = ["run"] + header
-
-    def fmt(a) -> list[str]:
-        return [repr(v) for v in np.asarray(a, dtype=float).tolist()]
-
-    with open(path, "w", encoding="utf-8", newline="") as fh:
-        fh.write(",".join(header) + "\n")
-        for frf in items:
-            F = len(frf.frequency_hz)
-            cols = [fmt(frf.frequency_hz)]
-            for c in channels:
-                if c in frf.channels:
-                    k = frf.channels.index(c)
-                    cols += [fmt(frf.H[:, k].real), fmt(frf.H[:, k].imag),
-                             fmt(frf.coherence[:, k])]
-                else:
-                    cols += [[""] * F] * 3
-            if multi:
-                cols = [[_csv_field(frf.run)] * F] + cols
-            fh.writelines(",".join(row) + "\n" for row in zip(*cols))
-
-
-def _csv_field(text: str) -> str:
-    if any(ch in text for ch in ',"\n'):
-        return '"' + text.replace('"', '""') + '"'
-    return text
-
-
-def _nan_if_none(value):
-    return np.nan if value is None else float(value)
-
-
-def write_frf_h5(path, frfsets, include_group_sums: bool = True) -> None:
-    """Write FRFs to HDF5, one group ``/frf/<run>`` per FrfSet.
-
-    Layout::
-
-        /frf                         attrs format="guidefit-frf", format_version=1
-        /frf/<run>/frequency_hz      (F,) float64, Hz
-        /frf/<run>/H                 (F, R) complex128, (m/s^2)/N
-        /frf/<run>/coherence         (F, R) float64
-        /frf/<run>/group_sums/Sff    (G, F)      (optional)
-        /frf/<run>/group_sums/Sxx    (G, F, R)
-        /frf/<run>/group_sums/Sfx    (G, F, R) complex128
-        /frf/<run>/group_sums/n_hits (G,)
-
-    Attributes of ``/frf/<run>``: ``estimator``, ``channels`` (str array, the
-    columns of H), ``n_averages``, ``exp_window_tau_s``, ``force_window_s``,
-    ``force_taper_s``, ``trigger_s``, ``sample_rate_hz`` (NaN where not
-    applicable, e.g. no exponential window), ``fft_precision`` (absent in
-    files written before it existed: read as ``"double"``).
-
-    Parameters
-    ----------
-    path : str or path-like
-        Output file (overwritten).
-    frfsets : FrfSet or sequence of FrfSet
-        Run names must be distinct and contain no ``/``.
-    include_group_sums : bool
-        Also store the jackknife group sums (O(G F R) numbers).
-
-    Examples
-    --------
-    >>> import numpy as np, tempfile, os
-    >>> rec = np.random.default_rng(6).normal(size=(3, 16, 3))
-    >>> frf = frf_from_records(rec, 16.0, run="vertical")
-    >>> path = os.path.join(tempfile.mkdtemp(), "frf.h5")
-    >>> write_frf_h5(path, [frf])
-    >>> back, = read_frf_h5(path)
-    >>> back.run, back.channels, bool(np.array_equal(back.H, frf.H))
-    ('vertical', ('ch1', 'ch2'), True)
-    """
-    import h5py
-
-    items = _as_list(frfsets)
-    names = [frf.run for frf in items]
-    for name in names:
-        if "/" in name or not name or names.count(name) > 1:
-            raise ValueError(f"run name {name!r} not usable as an HDF5 group (empty, '/' or repeated)")
-    with h5py.File(path, "w") as f:
-        root = f.create_group("frf")
-        root.attrs["format"] = "guidefit-frf"
-        root.attrs["format_version"] = 1
-        for frf in items:
-            g = root.create_group(frf.run)
-            g.create_dataset("frequency_hz", data=np.asarray(frf.frequency_hz, dtype=float))
-            g.create_dataset("H", data=np.asarray(frf.H, dtype=complex))
-            g.create_dataset("coherence", data=np.asarray(frf.coherence, dtype=float))
-            g.attrs["estimator"] = frf.estimator
-            g.attrs["channels"] = np.array(frf.channels, dtype=h5py.string_dtype())
-            g.attrs["n_averages"] = int(frf.n_averages)
-            g.attrs["fft_precision"] = frf.fft_precision
-            for key in ("exp_window_tau_s", "force_window_s", "force_taper_s", "trigger_s",
-                        "sample_rate_hz"):
-                g.attrs[key] = _nan_if_none(getattr(frf, key))
-            if include_group_sums and frf.group_sums:
-                s = g.create_group("group_sums")
-                for key in ("Sff", "Sxx", "Sfx", "n_hits"):
-                    s.create_dataset(key, data=np.asarray(frf.group_sums[key]))
-
-
-def read_frf_h5(path) -> tuple[FrfSet, ...]:
-    """Read FrfSets written by :func:`write_frf_h5` (layout there).
-
-    Examples
-    --------
-    See :func:`write_frf_h5`.
-    """
-    import h5py
-
-    def opt(v):
-        v = float(v)
-        return None if math.isnan(v) else v
-
-    out = []
-    with h5py.File(path, "r") as f:
-        for name, g in f["frf"].items():
-            a = g.attrs
-            sums = {k: g["group_sums"][k][()] for k in g["group_sums"]} if "group_sums" in g else {}
-            channels = tuple(c.decode() if isinstance(c, bytes) else str(c) for c in a["channels"])
-            out.append(FrfSet(
-                run=name,
-                frequency_hz=g["frequency_hz"][()],
-                channels=channels,
-                H=g["H"][()],
-                coherence=g["coherence"][()],
-                estimator=str(a["estimator"]),
-                n_averages=int(a["n_averages"]),
-                group_sums=sums,
-                exp_window_tau_s=opt(a["exp_window_tau_s"]),
-                force_window_s=opt(a["force_window_s"]),
-                force_taper_s=opt(a["force_taper_s"]),
-                trigger_s=opt(a["trigger_s"]),
-                sample_rate_hz=opt(a["sample_rate_hz"]),
-                fft_precision=str(a.get("fft_precision", "double")),
-            ))
-    return tuple(out)

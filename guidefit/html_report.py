@@ -87,6 +87,8 @@ def report_results(path, *, guide=None, settings=None, candidates=None, progress
 
     A failed explanation (no usable modes for it, a model error) is kept as
     its one-line message; a failed identification raises as in ``identify``.
+    ``progress`` is called as ``progress(done, total, name)`` after each
+    candidate effect (a :class:`guidefit.progress.Bar`, the one progress protocol).
     """
     from dataclasses import replace
 

@@ -526,30 +526,6 @@ def _plot_global(result, path: str) -> None:
     plt.close(fig)
 
 
-class file_progress:
-    """A rich progress bar over files on the given console (stderr when stdout carries JSON)."""
-
-    def __init__(self, total: int, console=None):
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
-
-        console = console or _console(stderr=True)
-        self._progress = None
-        if not console.is_terminal:  # a pipe or a log: no bar, and no blank line left behind
-            return
-        self._progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
-                                  TimeRemainingColumn(), console=console, transient=True)
-        self._task = self._progress.add_task("files", total=total)
-        self._progress.start()
-
-    def advance(self, n: int = 1) -> None:
-        if self._progress is not None:
-            self._progress.advance(self._task, n)
-
-    def close(self) -> None:
-        if self._progress is not None:
-            self._progress.stop()
-
-
 def render_batch_summary(rows: list[dict], outcomes: list, console=None) -> None:
     """One line per file: K_V, K_H, c_V, c_H and the check outcome."""
     from rich.table import Table
@@ -587,38 +563,6 @@ def render_frf_summary(frfsets, console=None) -> None:
 
 
 # --------------------------------------------------------------------------- explain
-
-
-class spinner:
-    """A rich progress bar fed by a ``progress(done, total, name)`` callback (stderr; off when disabled)."""
-
-    def __init__(self, title: str, enabled: bool = True):
-        self._title, self._enabled = title, enabled
-        self._progress, self._task = None, None
-
-    def __enter__(self):
-        if not self._enabled:
-            return None
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
-
-        console = _console(stderr=True)
-        if not console.is_terminal:  # a pipe or a log: no bar, and no blank line left on stderr
-            return None
-        self._progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
-                                  console=console, transient=True)
-        self._task = self._progress.add_task(self._title, total=None)
-        self._progress.start()
-        return self
-
-    def __call__(self, done, total, name=""):
-        if self._progress is not None:
-            self._progress.update(self._task, completed=done, total=total,
-                                  description=f"{self._title}: {name}" if name else self._title)
-
-    def __exit__(self, *exc):
-        if self._progress is not None:
-            self._progress.stop()
-        return False
 
 
 def render_explanation(result, console=None) -> None:

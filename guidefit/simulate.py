@@ -105,6 +105,7 @@ import numpy as np
 from guidefit.errors import ModelError
 from guidefit.layouts import DEFAULT_RUNS, HammerRun
 from guidefit.model.guides import guide_reference
+from guidefit.progress import progress_bar
 
 # the physics moved to sim_physics (issue 22); its public names stay importable from here
 from guidefit.sim_physics import (  # noqa: F401
@@ -519,7 +520,7 @@ def simulate(guide, effects=(), config: SimulationConfig | None = None, seed: in
         gives the same recording. Each hit has its own stream, so the first
         hits of a run do not depend on the number of hits or on the layout.
     progress : bool
-        Show a rich progress bar (for the command line).
+        Show a progress bar on stderr (for the command line; :func:`guidefit.progress.progress_bar`).
 
     Returns
     -------
@@ -542,10 +543,10 @@ def simulate(guide, effects=(), config: SimulationConfig | None = None, seed: in
 
     guide, config, faults, model = _prepare(guide, effects, config)
     runs, runs_truth = [], {}
-    with _progress(progress, len(config.runs) * config.hits) as tick:
+    with progress_bar("simulating hits", len(config.runs) * config.hits, enabled=progress) as bar:
         for run in config.runs:
             hits_truth: list = []
-            blocks = list(_iter_run(model, config, run, seed, faults, hits_truth, tick))
+            blocks = list(_iter_run(model, config, run, seed, faults, hits_truth, bar.advance))
             data = np.stack(blocks) if config.layout == "hits" else np.concatenate(blocks)
             runs.append(_run_data(config, model.guide, run, data))
             runs_truth[run.name] = _run_truth(run, hits_truth)
@@ -588,32 +589,6 @@ def _run_faults(faults, names) -> tuple:
     """The faults of one run: a loose sensor only where its channel is recorded (a layout may
     record it in one run only; :func:`_check_loose_sensors` made sure some run does)."""
     return tuple(f for f in faults if f.name != "loose_sensor" or f.parameters["channel"] in names)
-
-
-class _progress:
-    """Context manager yielding a tick() callable; a rich bar on stderr when enabled."""
-
-    def __init__(self, enabled: bool, total: int):
-        self.enabled, self.total, self.bar = enabled, total, None
-
-    def __enter__(self):
-        if not self.enabled:
-            return lambda: None
-        from rich.console import Console
-        from rich.progress import Progress
-
-        console = Console(stderr=True)
-        if not console.is_terminal:  # a log or a pipe gets no bar (nor the blank line it leaves)
-            return lambda: None
-        self.bar = Progress(console=console, transient=True)
-        self.bar.__enter__()
-        task = self.bar.add_task("simulating hits", total=self.total)
-        return lambda: self.bar.advance(task)
-
-    def __exit__(self, *exc):
-        if self.bar is not None:
-            self.bar.__exit__(*exc)
-        return False
 
 
 def _iter_run(model: _Model, config, run: HammerRun, seed: int, faults, hits_truth: list, tick):
@@ -675,13 +650,13 @@ def _stream_h5(path: Path, guide, effects, config, seed: int, progress: bool) ->
 
     guide, config, faults, model = _prepare(guide, effects, config)
     runs_truth = {}
-    with _progress(progress, len(config.runs) * config.hits) as tick:
+    with progress_bar("simulating hits", len(config.runs) * config.hits, enabled=progress) as bar:
         for k, run in enumerate(config.runs):
             hits_truth: list = []
             with open_signals_writer(path, _run_data(config, guide, run), guide=guide_reference(guide),
                                      description=_description(seed), mode="w" if k == 0 else "a",
                                      dtype=np.float32, compression="gzip") as writer:
-                for block in _iter_run(model, config, run, seed, faults, hits_truth, tick):
+                for block in _iter_run(model, config, run, seed, faults, hits_truth, bar.advance):
                     writer.append(block)
             runs_truth[run.name] = _run_truth(run, hits_truth)
     return _truth(model, config, seed, runs_truth, faults)

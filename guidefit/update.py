@@ -350,7 +350,11 @@ def _covariance(jac: np.ndarray, r: np.ndarray, freq_std_pct: float | None, sigm
 def update(deck_path, measured_path, param_texts, *, point_map_path=None, freq_std_pct: float | None = None,
            jobs: int = 1, ccx: str | None = None, progress=None, max_iterations: int = 20,
            timeout_s: float = 600.0) -> UpdateResult:
-    """Fit the joint factors to the measured modes (see the module docstring); nothing is written here."""
+    """Fit the joint factors to the measured modes (see the module docstring); nothing is written here.
+
+    ``progress()`` (no argument) is called after each ccx run, from the worker threads (the
+    command passes :meth:`guidefit.progress.Bar.advance`, the one progress protocol).
+    """
     from scipy.optimize import least_squares
 
     from guidefit.correlate import read_point_map, read_test

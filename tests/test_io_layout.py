@@ -100,6 +100,59 @@ def test_no_import_cycle_in_guidefit():
     assert _cycles(edges) == []
 
 
+#: The numerics of guidefit: signal processing, modal fitting, identification, the physical model.
+NUMERICS = (
+    "guidefit.frf", "guidefit.spectra", "guidefit.windows", "guidefit.hits", "guidefit.hit_checks",
+    "guidefit.prominence", "guidefit.modes", "guidefit.modal_base", "guidefit.curvefit", "guidefit.halfpower",
+    "guidefit.lsq", "guidefit.globalfit", "guidefit.globalvp", "guidefit.modal_stage", "guidefit.modeshapes",
+    "guidefit.labels", "guidefit.consistency", "guidefit.identify", "guidefit.identify_runs",
+    "guidefit.nonlinear", "guidefit.explain", "guidefit.simulate", "guidefit.sim_physics", "guidefit.predict",
+    "guidefit.update", "guidefit.correlate", "guidefit.model.static", "guidefit.model.vibration",
+    "guidefit.model.contact", "guidefit.model.effects",
+)
+#: What guidefit.io may import outside itself: errors and data types. ``model.guides`` is the
+#: guide catalogue, read for a named guide's measuring points (io.geometry.default_points).
+IO_MAY_IMPORT = {"guidefit.errors", "guidefit.frfset", "guidefit.outputs", "guidefit.workers",
+                 "guidefit.model.guides"}
+
+
+def _is_numerics(module: str) -> bool:
+    return any(module == n or module.startswith(n + ".") for n in NUMERICS)
+
+
+def test_io_imports_no_numerics():
+    """guidefit.io reads and writes files; no import of it (module level or inside a
+    function) reaches the numerics: frf.h5 is read into the FrfSet of guidefit.frfset."""
+    mods = _modules()
+    edges = _import_graph(mods)
+    assert "guidefit.frfset" in edges["guidefit.io.frf_files"]  # the graph sees real imports
+    assert all(m in mods or any(k.startswith(m + ".") for k in mods) for m in NUMERICS), "a stale name"
+    wrong = {(m, t) for m in edges if m.startswith("guidefit.io")
+             for t in edges[m] if not t.startswith("guidefit.io")
+             and (_is_numerics(t) or t not in IO_MAY_IMPORT)}
+    assert sorted(wrong) == []
+    assert not any(_is_numerics(t) for t in edges["guidefit.frfset"])
+
+
+def test_the_numerics_check_sees_a_function_level_import(tmp_path):
+    (tmp_path / "pkg" / "io").mkdir(parents=True)
+    (tmp_path / "pkg" / "io" / "a.py").write_text("def f():\n    from pkg.frf import x\n")
+    (tmp_path / "pkg" / "frf.py").write_text("x = 1\n")
+    mods = {"pkg.io.a": tmp_path / "pkg" / "io" / "a.py", "pkg.frf": tmp_path / "pkg" / "frf.py"}
+    assert _import_graph(mods)["pkg.io.a"] == {"pkg.frf"}
+
+
+def test_frf_does_no_file_io():
+    """The FRF numerics write and read no file: frf.csv and frf.h5 live in guidefit.io.frf_files."""
+    import guidefit.frf
+    import guidefit.io.frf_files
+
+    text = (PACKAGE / "frf.py").read_text(encoding="utf-8")
+    assert "h5py" not in text and "open(" not in text
+    for name in ("read_frf_h5", "write_frf_csv", "write_frf_h5"):  # documented names of the old home
+        assert getattr(guidefit.frf, name) is getattr(guidefit.io.frf_files, name)
+
+
 def test_the_graph_check_finds_a_cycle():
     edges = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}
     assert _cycles(edges) == [["a", "b", "c"]]

@@ -192,9 +192,10 @@ def test_a_writer_failing_midway_leaves_no_truncated_output(case, monkeypatch, c
                     "export": "deck.json"}[command]
     out.write_text("previous complete output\n")
     if command == "frf":
-        import guidefit.frf  # the format writer under the registry's whole-file writer
+        import guidefit.io.frf_files  # the format writer under the registry's whole-file writer
 
-        monkeypatch.setattr(guidefit.frf, "write_frf_csv", _half_then_fail(guidefit.frf.write_frf_csv))
+        monkeypatch.setattr(guidefit.io.frf_files, "write_frf_csv",
+                            _half_then_fail(guidefit.io.frf_files.write_frf_csv))
         args = ("frf", case, "--out", out)
     elif command == "identify-csv":
         monkeypatch.setattr(guidefit.report, "write_summary_csv",

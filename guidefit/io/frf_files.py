@@ -1,8 +1,9 @@
 """FRF files: guidefit's own ``frf.csv`` and ``frf.h5`` written and read; FRF files as input.
 
-The layouts are documented with their writers,
-:func:`guidefit.frf.write_frf_csv` and :func:`guidefit.frf.write_frf_h5`;
-this module declares them to the registry, so :func:`guidefit.io.write_frfs`
+The layouts are documented with their writers here, :func:`write_frf_csv`
+and :func:`write_frf_h5` (importable from :mod:`guidefit.frf` as well, their
+documented old home); :func:`read_frf_h5_file` is the one frf.h5 reader
+(:func:`read_frf_h5` gives its FrfSets alone). This module declares them to the registry, so :func:`guidefit.io.write_frfs`
 picks the writer by suffix. ``frf.h5`` written through the registry (``guidefit
 frf rec.h5 --out frf.h5``) also carries what the recording knew about each run
 (optional attributes, format version unchanged)::
@@ -44,6 +45,7 @@ from pathlib import Path
 import numpy as np
 
 from guidefit.errors import RecordingError
+from guidefit.frfset import ESTIMATORS, FrfSet
 from guidefit.io.registry import FileFormat
 
 __all__ = [
@@ -52,10 +54,13 @@ __all__ = [
     "holds_frfs",
     "infer_excitation_direction",
     "read_frf_file",
+    "read_frf_h5",
     "read_frf_h5_file",
     "read_input",
     "read_metadata",
+    "write_frf_csv",
     "write_frf_csv_file",
+    "write_frf_h5",
     "write_frf_h5_file",
 ]
 
@@ -260,16 +265,159 @@ def _frozen(a: np.ndarray) -> np.ndarray:
 # ------------------------------------------------------------------ frf.csv / frf.h5 writers
 
 
+def _as_list(frfsets) -> list:
+    items = [frfsets] if isinstance(frfsets, FrfSet) else list(frfsets)
+    if not items:
+        raise ValueError("frfsets is empty; need at least one FrfSet")
+    return items
+
+
+def write_frf_csv(path, frfsets) -> None:
+    """Write FRFs as CSV: ``frequency_hz``, then ``<channel>_re``, ``_im``, ``_coherence``.
+
+    One row per frequency bin and run. With several runs a first column ``run``
+    is added and the rows of each run follow one another; a channel missing
+    from a run leaves its cells empty. Numbers are written in Python's shortest
+    round-trip form (``repr``: lossless; ``nan`` where undefined).
+
+    Parameters
+    ----------
+    path : str or path-like
+        Output file.
+    frfsets : FrfSet or sequence of FrfSet
+
+    Examples
+    --------
+    >>> import numpy as np, tempfile, os
+    >>> from guidefit.frf import frf_from_records
+    >>> rec = np.random.default_rng(5).normal(size=(2, 8, 2))
+    >>> frf = frf_from_records(rec, 8.0, channel_names=("force", "acc_A_y"))
+    >>> path = os.path.join(tempfile.mkdtemp(), "frf.csv")
+    >>> write_frf_csv(path, frf)
+    >>> open(path).readline().strip()
+    'frequency_hz,acc_A_y_re,acc_A_y_im,acc_A_y_coherence'
+    """
+    items = _as_list(frfsets)
+    channels: list[str] = []
+    for frf in items:
+        channels += [c for c in frf.channels if c not in channels]
+    header = ["frequency_hz"] + [f"{c}_{part}" for c in channels
+                                 for part in ("re", "im", "coherence")]
+    multi = len(items) > 1
+    if multi:
+        header = ["run"] + header
+
+    def fmt(a) -> list[str]:
+        return [repr(v) for v in np.asarray(a, dtype=float).tolist()]
+
+    with open(path, "w", encoding="utf-8", newline="") as fh:
+        fh.write(",".join(header) + "\n")
+        for frf in items:
+            F = len(frf.frequency_hz)
+            cols = [fmt(frf.frequency_hz)]
+            for c in channels:
+                if c in frf.channels:
+                    k = frf.channels.index(c)
+                    cols += [fmt(frf.H[:, k].real), fmt(frf.H[:, k].imag),
+                             fmt(frf.coherence[:, k])]
+                else:
+                    cols += [[""] * F] * 3
+            if multi:
+                cols = [[_csv_field(frf.run)] * F] + cols
+            fh.writelines(",".join(row) + "\n" for row in zip(*cols))
+
+
+def _csv_field(text: str) -> str:
+    if any(ch in text for ch in ',"\n'):
+        return '"' + text.replace('"', '""') + '"'
+    return text
+
+
+def _nan_if_none(value):
+    return np.nan if value is None else float(value)
+
+
+def write_frf_h5(path, frfsets, include_group_sums: bool = True) -> None:
+    """Write FRFs to HDF5, one group ``/frf/<run>`` per FrfSet.
+
+    Layout::
+
+        /frf                         attrs format="guidefit-frf", format_version=1
+        /frf/<run>/frequency_hz      (F,) float64, Hz
+        /frf/<run>/H                 (F, R) complex128, (m/s^2)/N
+        /frf/<run>/coherence         (F, R) float64
+        /frf/<run>/group_sums/Sff    (G, F)      (optional)
+        /frf/<run>/group_sums/Sxx    (G, F, R)
+        /frf/<run>/group_sums/Sfx    (G, F, R) complex128
+        /frf/<run>/group_sums/n_hits (G,)
+
+    Attributes of ``/frf/<run>``: ``estimator``, ``channels`` (str array, the
+    columns of H), ``n_averages``, ``exp_window_tau_s``, ``force_window_s``,
+    ``force_taper_s``, ``trigger_s``, ``sample_rate_hz`` (NaN where not
+    applicable, e.g. no exponential window), ``fft_precision`` (absent in
+    files written before it existed: read as ``"double"``).
+
+    Parameters
+    ----------
+    path : str or path-like
+        Output file (overwritten).
+    frfsets : FrfSet or sequence of FrfSet
+        Run names must be distinct and contain no ``/``.
+    include_group_sums : bool
+        Also store the jackknife group sums (O(G F R) numbers).
+
+    Examples
+    --------
+    >>> import numpy as np, tempfile, os
+    >>> from guidefit.frf import frf_from_records
+    >>> rec = np.random.default_rng(6).normal(size=(3, 16, 3))
+    >>> frf = frf_from_records(rec, 16.0, run="vertical")
+    >>> path = os.path.join(tempfile.mkdtemp(), "frf.h5")
+    >>> write_frf_h5(path, [frf])
+    >>> back, = read_frf_h5(path)
+    >>> back.run, back.channels, bool(np.array_equal(back.H, frf.H))
+    ('vertical', ('ch1', 'ch2'), True)
+    """
+    import h5py
+
+    items = _as_list(frfsets)
+    names = [frf.run for frf in items]
+    for name in names:
+        if "/" in name or not name or names.count(name) > 1:
+            raise ValueError(f"run name {name!r} not usable as an HDF5 group (empty, '/' or repeated)")
+    with h5py.File(path, "w") as f:
+        root = f.create_group("frf")
+        root.attrs["format"] = "guidefit-frf"
+        root.attrs["format_version"] = 1
+        for frf in items:
+            g = root.create_group(frf.run)
+            g.create_dataset("frequency_hz", data=np.asarray(frf.frequency_hz, dtype=float))
+            g.create_dataset("H", data=np.asarray(frf.H, dtype=complex))
+            g.create_dataset("coherence", data=np.asarray(frf.coherence, dtype=float))
+            g.attrs["estimator"] = frf.estimator
+            g.attrs["channels"] = np.array(frf.channels, dtype=h5py.string_dtype())
+            g.attrs["n_averages"] = int(frf.n_averages)
+            g.attrs["fft_precision"] = frf.fft_precision
+            for key in ("exp_window_tau_s", "force_window_s", "force_taper_s", "trigger_s",
+                        "sample_rate_hz"):
+                g.attrs[key] = _nan_if_none(getattr(frf, key))
+            if include_group_sums and frf.group_sums:
+                s = g.create_group("group_sums")
+                for key in ("Sff", "Sxx", "Sfx", "n_hits"):
+                    s.create_dataset(key, data=np.asarray(frf.group_sums[key]))
+
+
+
+
 def write_frf_csv_file(path, frfsets, *, recording=None) -> None:
-    """:func:`guidefit.frf.write_frf_csv` (``recording`` is not used by CSV), written whole."""
-    from guidefit.frf import write_frf_csv
+    """:func:`write_frf_csv` (``recording`` is not used by CSV), written whole."""
     from guidefit.io._checks import _atomic
 
     _atomic(Path(os.fspath(path)), lambda tmp: write_frf_csv(tmp, frfsets))
 
 
 def write_frf_h5_file(path, frfsets, *, recording=None) -> None:
-    """:func:`guidefit.frf.write_frf_h5`, plus the recording's geometry of each run (module docstring).
+    """:func:`write_frf_h5`, plus the recording's geometry of each run (module docstring).
 
     Written whole (a temporary file renamed when complete); the HDF5 image is
     built in memory and written with one plain write, because a disk write
@@ -279,7 +427,6 @@ def write_frf_h5_file(path, frfsets, *, recording=None) -> None:
     excitation direction and hit point and the response channels' positions
     and directions; without it the file holds the FRFs only.
     """
-    from guidefit.frf import write_frf_h5
     from guidefit.io._checks import _atomic
 
     runs = _runs_of(recording)
@@ -370,7 +517,35 @@ def read_frf_h5_file(p: Path, display: str) -> FrfFile:
     return read_guarded(_read_frf_h5, p, display, "FRF file")
 
 
-def _read_frf_h5(p: Path, display: str) -> FrfFile:
+def read_frf_h5(path) -> tuple:
+    """The FrfSets of guidefit's ``frf.h5`` (layout at :func:`write_frf_h5`), one per run.
+
+    The one frf.h5 reader of :func:`read_frf_h5_file` (in a time-limited child
+    where possible), without the run metadata and notes it adds: the FRFs are
+    checked the same way, and any channel names are taken.
+
+    Raises
+    ------
+    RecordingError
+        The file is not guidefit's frf.h5 or holds a malformed run: one line naming it.
+
+    Examples
+    --------
+    See :func:`write_frf_h5`.
+    """
+    from guidefit.io.watchdog import read_guarded
+
+    display = os.fspath(path)
+    return read_guarded(_read_frf_h5_sets, Path(display), display, "FRF file")
+
+
+def _read_frf_h5_sets(p: Path, display: str) -> tuple:
+    """The checked FrfSets of an frf.h5 alone (no run metadata, so any channel names)."""
+    return _read_frf_h5(p, display, metadata=False)
+
+
+def _read_frf_h5(p: Path, display: str, metadata: bool = True):
+    """The one frf.h5 reader: an FrfFile, or with ``metadata=False`` the tuple of its FrfSets."""
     import h5py
 
     from guidefit.io.hdf5 import _h5_open_error
@@ -391,6 +566,8 @@ def _read_frf_h5(p: Path, display: str) -> FrfFile:
         names = list(root.keys())
         if not names:
             raise RecordingError(f"{display}: /frf holds no run")
+        if not metadata:
+            return tuple(_read_h5_frfset(display, root, name)[0] for name in names)
         frfsets, runs, notes = [], [], []
         for name in names:
             frf, run, run_notes = _read_h5_run(display, root, name, guide)
@@ -453,9 +630,16 @@ def _optional_seconds(attrs, key: str, where: str) -> float | None:
 
 
 def _read_h5_run(display: str, root, name: str, guide):
+    """The FrfSet of run ``name`` and its metadata-only Run (:func:`_h5_run_metadata`), with notes."""
+    frf, notes = _read_h5_frfset(display, root, name)
+    run, more = _h5_run_metadata(display, root[name].attrs, frf, guide)
+    return frf, run, notes + more
+
+
+def _read_h5_frfset(display: str, root, name: str):
+    """The checked FrfSet of run ``name`` of ``/frf`` and the notes on what the file lacked."""
     import h5py
 
-    from guidefit.frf import FrfSet
     from guidefit.io.hdf5 import _get_checked
 
     where = f"{display}: run '{name}'"
@@ -488,7 +672,7 @@ def _read_h5_run(display: str, root, name: str, guide):
     if estimator is None:
         estimator = "H1"
         notes.append(f"run '{name}': no estimator in the file; its FRFs taken as H1")
-    elif estimator not in ("H1", "H2", "Hv"):
+    elif estimator not in ESTIMATORS:
         raise RecordingError(f"{where}: estimator {estimator!r} is not one of H1, H2, Hv")
     n_avg = _count(a.get("n_averages", 0), f"{where}: n_averages")
     rate = _optional_float(a, "sample_rate_hz", where)
@@ -504,6 +688,13 @@ def _read_h5_run(display: str, root, name: str, guide):
                  force_taper_s=_optional_float(a, "force_taper_s", where),
                  trigger_s=_optional_float(a, "trigger_s", where),
                  sample_rate_hz=rate, fft_precision=_text(a.get("fft_precision")) or "double")
+    return frf, notes
+
+
+def _h5_run_metadata(display: str, a, frf, guide):
+    """The metadata-only Run of ``frf`` from its group's attributes ``a`` (geometry stored or defaulted)."""
+    name, channels, notes = frf.run, frf.channels, []
+    where = f"{display}: run '{name}'"
     geometry = {}
     for key, shape in (("excitation_direction", (3,)), ("positions_m", (len(channels), 3)),
                        ("directions", (len(channels), 3)), ("excitation_position_m", (3,))):
@@ -523,9 +714,9 @@ def _read_h5_run(display: str, root, name: str, guide):
     if "positions_m" not in geometry or "directions" not in geometry:
         notes.append(f"run '{name}': no sensor geometry in the file; the guide's default points and +axis "
                      "directions from the channel names")
-    run = frf_run(display, name, rate, excitation, channels, geometry.get("positions_m"),
+    run = frf_run(display, name, frf.sample_rate_hz, excitation, channels, geometry.get("positions_m"),
                   geometry.get("directions"), hit, guide)
-    return frf, run, notes
+    return run, notes
 
 
 # ------------------------------------------------------------------ input dispatch

@@ -345,7 +345,7 @@ def _number(text, kind, default):
 
 def _run_frfset(g: dict, cohs: list, name: str, display: str, notes: list):
     """The FrfSet of one reference DOF's FRF records (and coherences); what is missing goes to ``notes``."""
-    from guidefit.frf import FrfSet
+    from guidefit.frfset import FrfSet
 
     members = g["members"]
     first = members[0]

@@ -172,7 +172,7 @@ def write_frf_uff(path, frfsets, *, recording=None) -> None:
     """
     display = os.fspath(path)
     _check_suffix(display)
-    from guidefit.frf import FrfSet
+    from guidefit.frfset import FrfSet
 
     items = [frfsets] if isinstance(frfsets, FrfSet) else list(frfsets)
     if not items:
