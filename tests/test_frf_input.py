@@ -400,3 +400,19 @@ def test_frf_h5_links_and_group_sums_are_checked(case, tmp_path):
         del f["frf/lateral/group_sums/Sff"]
         f["frf/lateral/group_sums/Sff"] = sff[:, :10]  # a jackknife on other bins than H: refused
     _one_line_exit_2(path, "run 'lateral'", "group_sums/Sff")
+
+
+def test_frf_h5_without_an_estimator_is_read_as_h1_with_a_note(case, tmp_path):
+    """docs/frf.md: a missing estimator is taken as H1, with a note (was: refused, 'not one of H1, H2, Hv')."""
+    import h5py
+
+    path = tmp_path / "no_estimator.h5"
+    path.write_bytes(case["frf_h5"].read_bytes())
+    with h5py.File(path, "r+") as f:
+        for run in f["frf"]:
+            del f["frf"][run].attrs["estimator"]
+    source = read_input(path)
+    assert isinstance(source, FrfFile)
+    assert any("no estimator in the file" in n and "taken as H1" in n for n in source.notes)
+    got = identify(path)
+    _assert_same_joint(got, case["ident"], within=1.0)

@@ -669,7 +669,7 @@ def _read_h5_frfset(display: str, root, name: str):
                                      f"values; expected finite {shape}")
     notes = []
     estimator = _text(a.get("estimator"))
-    if estimator is None:
+    if not estimator:
         estimator = "H1"
         notes.append(f"run '{name}': no estimator in the file; its FRFs taken as H1")
     elif estimator not in ESTIMATORS:
