@@ -65,7 +65,7 @@ def test_std_is_consistent_with_error(sample_result):
 def test_frfs_end_at_three_times_the_band_top(sample_result):
     """identify sums the spectra only to 3x the band's nominal top (1.3 x the highest model
     mode), not to the Nyquist frequency; the band and every check stay well inside."""
-    from guidefit.modal_stage import FRF_TOP_FACTOR
+    from guidefit.identify import FRF_TOP_FACTOR
 
     top = FRF_TOP_FACTOR * 1.3 * 5563.6  # MRB35's roll_high (Hz), see guidefit predict
     for run in sample_result.runs:
