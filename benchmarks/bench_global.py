@@ -13,7 +13,7 @@ ADC; 8 hits of 0.05 s per run unless --hits/--record-s):
 * ``paper``: the paper-like rig (compliant lateral rail mounting, sensor mass)
 
 Methods compared per case and seed: guidefit ``global`` (this issue),
-guidefit ``per_run`` (the previous per-run fits), sdypy-EMA's LSCF with its
+guidefit ``per_run`` (the per-run fits, ``guidefit.identify.per_run_fits``), sdypy-EMA's LSCF with its
 pole selection (``--sdypy``; its ``select_closest_poles`` to the *nominal*
 model frequencies, the way a user without a stabilisation-diagram GUI runs
 it), and the paper's half-power method (the ``half_power`` entry of
@@ -38,7 +38,6 @@ import json
 import sys
 import time
 import warnings
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -73,16 +72,21 @@ def recording(case: str, seed: int, hits: int, record_s: float) -> tuple[Path, d
 
 
 def guidefit_modes(path: Path, method: str):
-    """{label: (f, f_std, zeta, zeta_std, hp_zeta)} of guidefit's result, and the wall time."""
-    from guidefit.identify import IdentifySettings, identify
+    """{label: (f, f_std, zeta, zeta_std, hp_zeta)} of guidefit's result, and the wall time.
+
+    ``global``: :func:`guidefit.identify.identify`; ``per_run``: the per-run diagnostic
+    :func:`guidefit.identify.per_run_fits` (each run's FRFs fitted on their own).
+    """
+    from guidefit.identify import identify, per_run_fits
 
     t0 = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        res = identify(path, settings=replace(IdentifySettings(), method=method))
+        res = identify(path) if method == "global" else per_run_fits(path)
     dt = time.perf_counter() - t0
     out = {}
-    for m in list(res.modes) + list(res.extra_modes):
+    extras = res.extra_modes if method == "global" else res.extras
+    for m in list(res.modes) + list(extras):
         hp = m.half_power
         out.setdefault(m.label, []).append((m.frequency_hz, m.frequency_std_hz, m.damping_ratio, m.damping_std,
                                             None if hp is None else (hp["f_n_hz"], hp["zeta_window_corrected"])))

@@ -47,8 +47,7 @@ def worker(path: str) -> None:
     """Child: FRFs of ``path``, then the modal stage once (first) and WARM_CALLS times; JSON on stdout."""
     import guidefit.globalfit
     import guidefit.identify
-    from guidefit.identify import IdentifySettings, _global_pass, run_frfs
-    from guidefit.modal_stage import frf_top_hz
+    from guidefit.identify import IdentifySettings, _global_pass, frf_top_hz, run_frfs
     from guidefit.model import vibration as vib
     from guidefit.model.guides import load_guide
     from guidefit.recording import read_recording
@@ -56,11 +55,11 @@ def worker(path: str) -> None:
     guide = load_guide("MRB35")
     model = vib.solve_modes(vib.model_from_guide(guide))
     settings = IdentifySettings()
-    collected = list(run_frfs(read_recording(path), settings, [], None, frf_top_hz(model, settings)))
+    collected = run_frfs(read_recording(path), settings, frf_top_hz(model, settings)).collected
     wall, cpu = [], []
     for _ in range(1 + WARM_CALLS):
         t0, c0 = time.perf_counter(), time.process_time()
-        res, _ = _global_pass(collected, guide, model, settings, [])
+        res = _global_pass(collected, guide, model, settings).modal
         wall.append(time.perf_counter() - t0)
         cpu.append(time.process_time() - c0)
     C.emit({"first_s": wall[0], "warm_s": statistics.median(wall[1:]), "first_cpu_s": cpu[0],

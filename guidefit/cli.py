@@ -9,6 +9,7 @@ on stderr, never a traceback.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import sys
 
@@ -310,12 +311,34 @@ _fft_precision_option = click.option(
     help="Precision the FFTs compute in; auto: that of the stored samples (float32 files: single).")
 
 
+class _EstimatorChoice(click.Choice):
+    """``--estimator``: the names of :data:`guidefit.frf.ESTIMATORS`, read when click first needs them
+    (help, parsing), so that the CLI starts without importing numpy."""
+
+    def __init__(self):
+        super().__init__((), case_sensitive=True)
+
+    @property
+    def choices(self):
+        from guidefit.frf import ESTIMATORS
+
+        return tuple(ESTIMATORS)
+
+    @choices.setter
+    def choices(self, _value):  # click.Choice.__init__ assigns the (empty) tuple given above
+        pass
+
+
+#: ``--estimator`` of identify, frf, explain and report (the FRF estimators of guidefit.frf).
+_estimator_option = click.option("--estimator", type=_EstimatorChoice(), default="H1", show_default=True)
+
+
 def _identify_options(func):
     """The identify options that change numbers, shared by identify, explain and report."""
     func = _fft_precision_option(func)
     func = click.option("--no-jackknife", is_flag=True,
                         help="Skip the hit-group jackknife (faster, fit std only).")(func)
-    return click.option("--estimator", type=click.Choice(["H1", "H2", "Hv"]), default="H1", show_default=True)(func)
+    return _estimator_option(func)
 
 
 def _identify_settings(estimator="H1", no_jackknife=False, fft_precision="auto", **extra):
@@ -340,7 +363,7 @@ def _candidate_names(candidates: str | None):
 @main.command(name="identify")
 @click.argument("files", nargs=-1, required=True, type=click.Path())
 @click.option("--guide", "guide_name", help="Guide name or TOML (default: the file's guide attribute, else MRB35).")
-@click.option("--estimator", type=click.Choice(["H1", "H2", "Hv"]), default="H1", show_default=True)
+@_estimator_option
 @click.option("--json", "as_json", is_flag=True, help="One JSON object per file (JSON Lines) on stdout.")
 @click.option("--csv", "csv_path", type=click.Path(dir_okay=False), help="Write one row per file to this CSV.")
 @click.option("--summary", "summary_path", type=click.Path(dir_okay=False), help="Same as --csv.")
@@ -365,81 +388,124 @@ def identify_cmd(files, guide_name, estimator, as_json, csv_path, summary_path, 
     docs/recordings.md, "Your own DAQ files: quick start".
     """
     import time
-    from pathlib import Path
 
     from guidefit import report
-    from guidefit.identify import IdentifySettings
 
-    plot_targets = {}
-    if plot_path:
-        plot_targets = {path: plot_path if len(files) == 1 else str(
-            Path(plot_path).with_stem(f"{Path(plot_path).stem}_{Path(path).stem}")) for path in files}
+    plot_targets = _plot_targets(files, plot_path)
     summary_paths = [csv_path] if summary_path == csv_path else [csv_path, summary_path]  # "same as --csv"
     _refuse([*summary_paths, junit_path, *plot_targets.values()], [*files, check_path, _guide_file(guide_name)])
     _plot_file(plot_path)
-    spec = None
-    if check_path:
-        from guidefit.check import load_spec
-
-        try:
-            spec = load_spec(check_path)
-        except RecursionError:  # tomllib reads nested arrays recursively
-            from guidefit.errors import GuidefitError
-
-            raise GuidefitError(f"{check_path}: not a tolerance spec (arrays or tables nested too deeply)") from None
-    settings = IdentifySettings(estimator=estimator, jackknife=not no_jackknife, fft_precision=fft_precision)
+    spec = _check_spec(check_path)
+    settings = _identify_settings(estimator, no_jackknife, fft_precision)
     started = time.perf_counter()
-    worst, rows, outcomes = 0, [], []
     console = report._console(stderr=as_json)
-    for path, (code, result, error, details) in _map_files(files, guide_name, settings, jobs, console,
-                                                           keep_frfs=bool(plot_path)):
-        violations = []
-        if result is None:
-            click.echo(f"guidefit: error: {error}", err=True)
-            _echo_details(details, verbose)
-            data = _failed_json(path, guide_name, code, error, details)
-            rows.append({"file": str(path), "error": error})
-        else:
-            data = result.to_dict()
-            rows.append(result.summary_row())
-            if result.gate is not None:  # modes reported, joint parameters withheld: identification failed
-                click.echo(f"guidefit: identification rejected: {path}: {result.gate}", err=True)
-                _echo_details(result.warnings, verbose)
-                code = max(code, 1)
-            for line in result.unidentified:  # a joint parameter the set-up should give is missing
-                click.echo(f"guidefit: identification incomplete: {path}: {line}", err=True)
-                code = max(code, 1)
-            if plot_path:
-                with _written(plot_targets[path]) as tmp:
-                    report.plot_identification(result, tmp)
-            if not as_json:
-                report.render_identification(result, console)
-        if spec is not None and result is not None:
-            from guidefit.check import check_result
-
-            violations = check_result(data, spec)
-            for line in violations:
-                click.echo(f"guidefit: check failed: {line}", err=True)
-            if violations:
-                code = max(code, 1)
-            data["check"] = {"passed": not violations, "violations": violations}
-        if as_json:
-            click.echo(report.dump_json(data))
-        worst = max(worst, code)
-        gated = [f"identification rejected: {result.gate}"] if result is not None and result.gate else []
-        gated += [f"identification incomplete: {line}" for line in (result.unidentified if result else ())]
-        outcomes.append((str(path), violations + gated, error))
+    judged = []
+    for path, answer in _map_files(files, guide_name, settings, jobs, console, keep_frfs=bool(plot_path)):
+        judged.append(_judge_file(path, *answer, spec=spec, guide_name=guide_name))
+        _show_file(judged[-1], console, as_json, verbose, plot_targets.get(path))
     for target in filter(None, {csv_path, summary_path}):
         with _written(target) as tmp:
-            report.write_summary_csv(rows, tmp)
+            report.write_summary_csv([j.row for j in judged], tmp)
     if junit_path:
         from guidefit.check import junit_xml
 
         with _written(junit_path) as tmp:
-            junit_xml(outcomes, tmp, time.perf_counter() - started)
+            junit_xml([j.outcome for j in judged], tmp, time.perf_counter() - started)
     if len(files) > 1 and not as_json:
-        report.render_batch_summary(rows, outcomes, console)
-    sys.exit(worst)
+        report.render_batch_summary([j.row for j in judged], [j.outcome for j in judged], console)
+    sys.exit(max((j.code for j in judged), default=0))
+
+
+def _plot_targets(files, plot_path) -> dict:
+    """``--plot`` file per input: the path itself for one file, else with the input's stem appended."""
+    from pathlib import Path
+
+    if not plot_path:
+        return {}
+    return {path: plot_path if len(files) == 1 else str(
+        Path(plot_path).with_stem(f"{Path(plot_path).stem}_{Path(path).stem}")) for path in files}
+
+
+def _check_spec(check_path):
+    """The ``--check`` tolerance spec (:func:`guidefit.check.load_spec`), None without the option."""
+    if not check_path:
+        return None
+    from guidefit.check import load_spec
+
+    try:
+        return load_spec(check_path)
+    except RecursionError:  # tomllib reads nested arrays recursively
+        from guidefit.errors import GuidefitError
+
+        raise GuidefitError(f"{check_path}: not a tolerance spec (arrays or tables nested too deeply)") from None
+
+
+@dataclasses.dataclass(frozen=True)
+class _Judged:
+    """What identify says of one file: its exit code, the result or the error (and its details), the JSON
+    object, the summary row and the ``--check`` violations."""
+
+    path: str
+    code: int
+    result: object  # guidefit.identify.Identification or None
+    error: str | None
+    details: tuple
+    data: dict
+    row: dict
+    violations: list
+
+    @property
+    def outcome(self) -> tuple:
+        """(file, failures, error) for JUnit and the batch summary: check violations, gate, incomplete."""
+        result = self.result
+        gated = [f"identification rejected: {result.gate}"] if result is not None and result.gate else []
+        gated += [f"identification incomplete: {line}" for line in (result.unidentified if result else ())]
+        return str(self.path), self.violations + gated, self.error
+
+
+def _judge_file(path, code, result, error, details, spec=None, guide_name=None) -> _Judged:
+    """One file's identify answer (:func:`_identify_one`) judged: a gate, a missing joint parameter or
+    a failed ``--check`` make exit 1 at least."""
+    if result is None:
+        data, row = _failed_json(path, guide_name, code, error, details), {"file": str(path), "error": error}
+    else:
+        data, row = result.to_dict(), result.summary_row()
+        if result.gate is not None or result.unidentified:  # modes reported, joint parameters withheld or missing
+            code = max(code, 1)
+    violations = []
+    if spec is not None and result is not None:
+        from guidefit.check import check_result
+
+        violations = check_result(data, spec)
+        if violations:
+            code = max(code, 1)
+        data["check"] = {"passed": not violations, "violations": violations}
+    return _Judged(path, code, result, error, details, data, row, violations)
+
+
+def _show_file(judged: _Judged, console, as_json: bool, verbose: bool, plot_target=None) -> None:
+    """Render one judged file: its lines on stderr, the plot, the table (or the JSON line on stdout)."""
+    from guidefit import report
+
+    result, path = judged.result, judged.path
+    if result is None:
+        click.echo(f"guidefit: error: {judged.error}", err=True)
+        _echo_details(judged.details, verbose)
+    else:
+        if result.gate is not None:  # modes reported, joint parameters withheld: identification failed
+            click.echo(f"guidefit: identification rejected: {path}: {result.gate}", err=True)
+            _echo_details(result.warnings, verbose)
+        for line in result.unidentified:  # a joint parameter the set-up should give is missing
+            click.echo(f"guidefit: identification incomplete: {path}: {line}", err=True)
+        if plot_target:
+            with _written(plot_target) as tmp:
+                report.plot_identification(result, tmp)
+        if not as_json:
+            report.render_identification(result, console)
+    for line in judged.violations:
+        click.echo(f"guidefit: check failed: {line}", err=True)
+    if as_json:
+        click.echo(report.dump_json(judged.data))
 
 
 def _echo_details(details, verbose: bool) -> None:
@@ -548,7 +614,7 @@ def _parse_window(text: str | None):
 
 @main.command(name="frf")
 @click.argument("recording", type=click.Path(dir_okay=False))
-@click.option("--estimator", type=click.Choice(["H1", "H2", "Hv"]), default="H1", show_default=True)
+@_estimator_option
 @click.option("--window", "window_text", default=None,
               help="auto | none | force=S,taper=S,tau=S,end=FRACTION (force window, exponential tau or "
                    "its end level).  [default: auto; an input of FRFs has its own windows]")

@@ -4,7 +4,7 @@ Two checks on the modes that :func:`guidefit.identify.identify` found, both
 built on one fact: the carriage is a rigid body, so every mode's modal
 constants at the accelerometers (``Mode.modal_constants = phi(r) phi(e)``,
 1/kg) are the readings of one rigid motion ``q = (u, v, theta, psi, phi)``,
-``s = S q`` with ``S`` the sensor matrix (:func:`guidefit.identify.sensor_matrix`,
+``s = S q`` with ``S`` the sensor matrix (:func:`guidefit.labels.sensor_matrix`,
 row ``r``: the sensor's direction times :func:`~guidefit.model.vibration.rigid_body_map`
 at its position).
 
@@ -32,10 +32,11 @@ the same z, so rigid motion alone cannot tell which of them is wrong) are
 told apart by the driving-point residue, which must be positive for every
 mode, and by the modal mass (below); when neither decides, the warning names
 both. Up to :data:`MAX_FAULTS` faults are found one after the other, or as
-a pair when no single correction explains the residual; then
-:func:`check_sensors` has identify fit each run with a faulty channel again
-on corrected FRFs (a scale fault divided out, an axis fault's channel left
-out and the FRFs computed again), so labels, K and c come from good data. Real
+a pair when no single correction explains the residual; then identify
+corrects the FRFs (:func:`corrected_frf`: a scale fault divided out, an
+axis fault's channel left out and the FRFs computed again,
+:func:`guidefit.identify.corrected_frfs`) and fits them again, so labels,
+K and c come from good data. Real
 coupled physics (a corner mass, a damaged row, a base with its own mode)
 keeps the carriage rigid and stays silent; shapes of modes fitted from a
 noisy or weak peak are weighted by their amplitude relative to the run's
@@ -82,8 +83,6 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from guidefit.frf import top_of
-
 #: Relative RMS rigid-fit residual of all shapes below which no sensor fault is looked for.
 FAULT_MIN_RELRES = 0.01
 #: The best correction must cut the residual sum of squares at least this many times.
@@ -122,7 +121,7 @@ _AXES = {"x": np.array([1.0, 0.0, 0.0]), "y": np.array([0.0, 1.0, 0.0]), "z": np
 class ShapeSet:
     """The real modal constants (1/kg) of one run's modes at its sensors.
 
-    ``sensors`` is (n_channels, 5) (:func:`guidefit.identify.sensor_matrix`),
+    ``sensors`` is (n_channels, 5) (:func:`guidefit.labels.sensor_matrix`),
     ``shapes`` (n_modes, n_channels); ``driving`` is the hammer's row (5,)
     (its direction times the rigid-body map at the hit point), None if unknown;
     ``labels`` and ``frequencies_hz`` name the modes, ``band_hz`` is where they
@@ -662,34 +661,23 @@ def mass_warnings(modes, sets: list[ShapeSet], mass_matrix: np.ndarray, mass_kg:
 # --------------------------------------------------------------------------- identify glue
 
 
-def driving_row(direction, position_m) -> np.ndarray | None:
-    """The hammer's row b (5,): its direction times the rigid-body map at the hit point; None when the
-    hit point is unknown (never the origin's: a hit there excites only some modes)."""
-    from guidefit.labels import driving_row as row
-
-    return row(direction, position_m)
-
-
-def sensor_rows(channels) -> np.ndarray:
-    """(n_channels, 5): :func:`guidefit.labels.sensor_matrix`, the one sensor matrix of guidefit."""
-    from guidefit.labels import sensor_matrix
-
-    return sensor_matrix(channels)
-
-
 def shape_sets(runs, modes, hit_points: dict, band_hz=(None, None)) -> list[ShapeSet]:
     """One :class:`ShapeSet` per run result from identify's modes (``shape`` dicts, real modal constants).
 
     ``hit_points`` maps run name to the hit position (m) or None; ``band_hz``
     is identify's (f_min_hz, f_max_hz) setting, the top cut to 0.4 times the
-    run's sample rate as identify's search band is.
+    run's sample rate as identify's search band is. The sensor rows and the
+    hammer's row are :func:`guidefit.labels.sensor_matrix` and
+    :func:`guidefit.labels.driving_row`.
     """
+    from guidefit.labels import driving_row, sensor_matrix
+
     out = []
     for run in runs:
         chans = list(run.channels)
         mine = [m for m in modes if m.run == run.name]
         shapes = np.array([[m.shape.get(c.name, 0.0) for c in chans] for m in mine]).reshape(len(mine), len(chans))
-        out.append(ShapeSet(run.name, tuple(c.name for c in chans), sensor_rows(chans),
+        out.append(ShapeSet(run.name, tuple(c.name for c in chans), sensor_matrix(chans),
                             np.array([np.asarray(c.position_m, float) for c in chans]).reshape(-1, 3),
                             np.array([np.asarray(c.direction, float) for c in chans]).reshape(-1, 3),
                             shapes, driving_row(run.excitation_direction, hit_points.get(run.name)),
@@ -725,93 +713,24 @@ def corrected_frf(frf, faults):
                    channels=tuple(frf.channels[i] for i in keep), group_sums=sums)
 
 
-def frf_without(run, drop, settings, top_hz=None):
-    """The run's FRFs computed again without the channels in ``drop`` (hits streamed, as identify does),
-    up to ``top_hz`` (None: the Nyquist frequency).
-
-    A channel that reads another axis can pull the automatic exponential
-    window (chosen from every response's decay): its FRFs are not only left
-    out but the windows are chosen again from the good channels.
-    """
-    from types import SimpleNamespace
-
-    from guidefit.frf import WindowSettings, compute_frf
-    from guidefit.hits import HitSettings, iter_hits
-
-    keep = [i for i, ch in enumerate(run.channels) if ch.name not in drop]
-    proxy = SimpleNamespace(name=run.name, channels=tuple(run.channels[i] for i in keep),
-                            force_index=keep.index(run.force_index), sample_rate_hz=run.sample_rate_hz,
-                            pretrigger_samples=run.pretrigger_samples, layout=run.layout, n_samples=run.n_samples,
-                            n_hits_stored=run.n_hits_stored, sample_dtype=run.sample_dtype)
-    hits = (SimpleNamespace(index=h.index, accepted=h.accepted, reason=h.reason,
-                            data=None if h.data is None else h.data[:, keep])
-            for h in iter_hits(run, settings.hits or HitSettings()))
-    return compute_frf(proxy, hits, estimator=settings.estimator, window=settings.window or WindowSettings(),
-                       precision=settings.fft_precision, max_frequency_hz=top_hz)
+def axis_fault_channels(faults, channels) -> set:
+    """The names among ``channels`` of channels that read another axis (their FRFs are left out)."""
+    names = {getattr(ch, "name", ch) for ch in channels}
+    return {f.channel for f in faults if f.kind == "axis"} & names
 
 
 @dataclass(frozen=True)
 class SensorCheck:
-    """What :func:`check_sensors` found: the faults, the runs and modes without them, the sets behind the gate."""
+    """What :func:`check_global` found: the faults, the shape sets behind the gate, one warning per fault."""
 
     faults: tuple
-    runs: list
-    modes: list
     sets: list
-    warnings: list
+    warnings: tuple
 
 
 def _hit_points(recording) -> dict:
     """Run name -> hit point (m) or None when the file does not give it (:attr:`Run.hit_position_m`)."""
     return {r.name: r.hit_position_m for r in recording.runs}
-
-
-def check_sensors(runs, modes, recording, guide, model, settings, refit) -> SensorCheck:
-    """Find faulty channels in identify's modes and identify again without their faults.
-
-    Parameters
-    ----------
-    runs : list of guidefit.identify.RunResult
-    modes : list of guidefit.identify.IdentifiedMode
-        Every labelled mode of every run.
-    recording : guidefit.recording.Recording
-        For the hit points and the runs' channels.
-    guide, model
-        The guide and its nominal modal solution.
-    settings : guidefit.identify.IdentifySettings
-        How identify computed the FRFs (they are computed again for axis faults).
-    refit : callable (Run, FrfSet) -> list of IdentifiedMode
-        Fits and labels one run's modes; every run with a faulty channel is
-        fitted again on its corrected FRFs (a channel read 1000x too high no
-        longer hides the modes the others see, a wrong axis no longer pulls
-        the window or the labels).
-    """
-    from guidefit.model import vibration as vib
-
-    mass = vib.carriage_mass_matrix(vib.model_from_guide(guide))
-    hit_points = _hit_points(recording)
-    band = (getattr(settings, "f_min_hz", None), getattr(settings, "f_max_hz", None))
-    sets = shape_sets(runs, modes, hit_points, band)
-    faults = find_sensor_faults(sets, mass)
-    if not faults:
-        return SensorCheck((), list(runs), list(modes), sets, [])
-    messages = [f.message for f in faults]
-    by_name = {r.name: r for r in recording.runs}
-    new_runs, new_modes = [], []
-    for rr in runs:
-        names = {ch.name for ch in rr.channels}
-        if not any(f.channel in names for f in faults):
-            new_runs.append(rr)
-            new_modes.extend(m for m in modes if m.run == rr.name)
-            continue
-        run = by_name[rr.name]
-        drop = {f.channel for f in faults if f.kind == "axis"} & names
-        frf = corrected_frf(frf_without(run, drop, settings, top_of(rr.frf)) if drop else rr.frf, faults)
-        fitted = refit(run, frf)
-        chans = {ch.name: ch for ch in run.channels}
-        new_runs.append(replace(rr, frf=frf, modes=fitted, channels=[chans[name] for name in frf.channels]))
-        new_modes.extend(fitted)
-    return SensorCheck(faults, new_runs, new_modes, shape_sets(new_runs, new_modes, hit_points, band), messages)
 
 
 # --------------------------------------------------------------------------- the global modal stage's glue
@@ -823,8 +742,9 @@ def check_global(runs, recording, guide, settings, faults=None) -> SensorCheck:
     ``runs`` are identify's RunResults whose ``modes`` are the run's views of
     the global modes (``run`` and ``shape`` of that run). With ``faults``
     given (the FRFs already corrected for them), only the shape sets are made
-    again for the gate. ``runs``/``modes`` of the result are not changed: the
-    caller fits again with :func:`corrected_runs`.
+    again for the gate. The correction itself is a step of the identify
+    pipeline (:func:`guidefit.identify.corrected_frfs`): the FRFs corrected,
+    the global fit made again.
     """
     from guidefit.model import vibration as vib
 
@@ -834,23 +754,7 @@ def check_global(runs, recording, guide, settings, faults=None) -> SensorCheck:
     sets = shape_sets(runs, modes, hit_points, band)
     if faults is None:
         faults = find_sensor_faults(sets, vib.carriage_mass_matrix(vib.model_from_guide(guide)))
-    return SensorCheck(tuple(faults), list(runs), modes, sets, [f.message for f in faults])
-
-
-def corrected_runs(collected, faults, settings, recompute: bool = True) -> list:
-    """The (run, FrfSet, hit rows) triples with each faulty channel corrected (:func:`corrected_frf`);
-    with ``recompute`` (time data) a wrong-axis channel's run has its FRFs computed again without it,
-    so that channel no longer pulls the automatic window either."""
-    out = []
-    for run, frf, rows in collected:
-        names = {ch.name for ch in run.channels}
-        if not any(f.channel in names for f in faults):
-            out.append((run, frf, rows))
-            continue
-        drop = {f.channel for f in faults if f.kind == "axis"} & names
-        base = frf_without(run, drop, settings, top_of(frf)) if drop and recompute else frf
-        out.append((run, corrected_frf(base, faults), rows))
-    return out
+    return SensorCheck(tuple(faults), sets, tuple(f.message for f in faults))
 
 
 def global_mass_warnings(runs, sets: list[ShapeSet], guide, model) -> list[str]:

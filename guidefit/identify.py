@@ -1,17 +1,31 @@
 r"""From a hammer recording to K_V, K_H, c_V, c_H (the paper's Eq. 24-29).
 
-Pipeline: per run, hits (:mod:`guidefit.hits`) -> averaged FRFs of every
-response channel (:mod:`guidefit.frf`); then one modal model of all runs
-(:func:`guidefit.modal_stage.identify_frfs`: poly-reference LSCF
-stabilisation diagram, pole selection by stability, global
-variable-projection fit with shared poles, :mod:`guidefit.globalfit`) ->
-each mode's modal constants of every run assembled into one rigid-body
-motion of the carriage and labelled by the motion that carries most of its
-kinetic energy (vertical v, pitch theta, yaw psi, roll u-phi); ambiguous
-labels are reported, not assigned. Every run's own estimate is kept
-(``estimates``). ``IdentifySettings(method="per_run")`` runs the previous
-per-run fits (each label keeps the estimate with the smallest frequency
-uncertainty), kept as a diagnostic.
+Pipeline (:func:`identify`), one straight sequence of stages that take
+values and return values, warnings inside their results:
+
+1. recording -> hits -> FRFs (:func:`frf_stage`): per run, hits
+   (:mod:`guidefit.hits`) streamed into averaged FRFs of every response
+   channel (:mod:`guidefit.frf`), up to :func:`frf_top_hz`; or the FRFs of
+   an FRF file.
+2. modal fit, shapes and labels (:func:`modal_fit`): one modal model of all
+   runs (:func:`guidefit.modal_stage.identify_frfs`: poly-reference LSCF
+   stabilisation diagram, pole selection by stability, global
+   variable-projection fit with shared poles, :mod:`guidefit.globalfit`),
+   each mode's modal constants of every run assembled into one rigid-body
+   motion of the carriage and labelled (:mod:`guidefit.labels`); ambiguous
+   labels are reported, not assigned; every run's own estimate is kept
+   (``estimates``). Declared refit: harder force levels whose modes move
+   are fitted apart.
+3. sensor check (:func:`sensor_check`, :mod:`guidefit.consistency`): a
+   channel that does not fit rigid motion is named; declared refit: the
+   corrected FRFs re-enter at the FRF stage (:func:`corrected_frfs`) and
+   the fit is made again.
+4. run results and force levels (:func:`run_results`).
+5. parameters, gate, result (:func:`conclude`).
+
+:func:`per_run_fits` is a diagnostic beside the pipeline: each run's FRFs
+fitted on their own (the per-run curve fits identify used before the
+global fit).
 
 The joint parameters follow the paper's single-DOF reading of the vertical
 and horizontal (``roll_low``) modes, with M the carriage mass of the guide:
@@ -42,30 +56,15 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from guidefit.errors import IdentificationError, identification_failure
-from guidefit.identify_runs import (  # noqa: F401 - the per-run stage (issue 22), importable from here
+from guidefit.identify_runs import (
     JOINT_LABELS,
-    MIN_BINS_IN_BAND,
     _excitation_warnings,
-    _fit_run,
     _force_levels,
     _hit_row,
     _quality_warnings,
-    _refit_in_band,
-    _refit_one,
-    _select,
-    _with_jackknife,
     frf_channels,
 )
-from guidefit.modeshapes import (  # noqa: F401 - also re-exported: guidefit.identify.IdentifiedMode etc.
-    UNNAMED_LABELS,
-    IdentifiedMode,
-    _coherence_at,
-    _half_power_entry,
-    energy_shares,
-    real_shape,
-    rigid_body_motion,
-    sensor_matrix,
-)
+from guidefit.modeshapes import UNNAMED_LABELS, IdentifiedMode  # noqa: F401 - guidefit.identify.IdentifiedMode
 
 # --------------------------------------------------------------------------- Eq. (24)-(29)
 
@@ -129,11 +128,14 @@ class IdentifySettings:
     force_levels: bool = False  # per force-level frequencies (for explain's amplitude_dependence)
     force_bins: int = 3
     min_force_ratio: float = 1.5
-    method: str = "global"  # "global": one modal model of all runs (guidefit.globalfit); "per_run": legacy fits
+    method: str = "global"  # one modal model of all runs (guidefit.globalfit); the only method
 
     def __post_init__(self):
-        if self.method not in ("global", "per_run"):
-            raise ValueError(f"IdentifySettings.method must be 'global' or 'per_run', got {self.method!r}")
+        if self.method == "per_run":
+            raise ValueError("IdentifySettings(method='per_run') is gone: identify fits one modal model of all "
+                             "runs; the per-run fits are the diagnostic guidefit.identify.per_run_fits(path)")
+        if self.method != "global":
+            raise ValueError(f"IdentifySettings.method must be 'global', got {self.method!r}")
 
 
 @dataclass(frozen=True)
@@ -193,7 +195,7 @@ class Identification:
             ],
             "force_levels": [lvl for run in self.runs for lvl in run.force_levels],
             "run_modes": self.run_modes(),
-            "method": "global_fit" if self.modal is not None else "per_run",
+            "method": "global_fit",
             "gate": self.gate,
             "unidentified": list(self.unidentified),
             "sensor_faults": [{"channel": f.channel, "kind": f.kind, "factor": f.factor, "axis": f.axis,
@@ -239,75 +241,60 @@ class Identification:
         return row
 
 
-# --------------------------------------------------------------------------- shapes and labels
-# --------------------------------------------------------------------------- pipeline
+# --------------------------------------------------------------------------- stage results
 
 
-def run_frfs(recording, settings: IdentifySettings, warnings: list, failed: list | None = None,
-             max_frequency_hz: float | None = None):
-    """Yield (run, FrfSet, hit rows) for every run that gives an FRF; problems go to ``warnings``.
+@dataclass(frozen=True)
+class FrfStage:
+    """What the FRF stage gives (:func:`frf_stage`): the runs' FRFs and the warnings of their hits."""
 
-    The hit rows of a run that gives no FRF are added to ``failed`` (when given).
-    ``max_frequency_hz``: the FRFs end there (:func:`guidefit.frf.compute_frf`).
+    collected: tuple  # (Run, FrfSet, hit rows) of every run that gave FRFs, in the file's order
+    failed_rows: tuple = ()  # the hit rows of the runs that gave none (every hit rejected)
+    warnings: tuple = ()
 
-    Hits stream from the file into the spectral sums (bounded memory); each
-    rejected hit is listed with its reason.
+
+@dataclass(frozen=True)
+class ModalPass:
+    """One global fit of the collected FRFs (:func:`_global_pass`)."""
+
+    modal: object  # guidefit.modal_stage.ModalResult; None when the fit failed (the reason in warnings)
+    runs: tuple  # RunResult of every collected run, its modes the run's views of the shared modes
+    warnings: tuple = ()
+
+
+@dataclass(frozen=True)
+class ModalFit:
+    """The modal fit stage (:func:`modal_fit`, then :func:`sensor_check`) and what its declared refits did.
+
+    ``collected`` are the FRFs of the final fit (sensor faults corrected),
+    ``levels_only`` the harder force levels fitted apart, ``notes`` the
+    sentences that say so, ``check`` the sensor check of the final fit.
     """
-    from guidefit.frf import WindowSettings, compute_frf
-    from guidefit.hits import HitSettings, iter_hits
 
-    for run in recording.runs:
-        if not run.response_indices:
-            from guidefit.errors import RecordingError
+    collected: tuple
+    levels_only: tuple
+    passed: ModalPass
+    notes: tuple = ()
+    check: object = None  # guidefit.consistency.SensorCheck
 
-            raise RecordingError(f"{run.file}: run '{run.name}': no acceleration channel; an FRF needs "
-                                 "'force' and at least one 'acc_<point>_<axis>'")
-        rows: list[dict] = []
-
-        def tapped(it, rows=rows, run=run):
-            for hit in it:
-                rows.append(_hit_row(run.name, hit))
-                if not hit.accepted:
-                    warnings.append(f"run '{run.name}' hit {hit.index}: rejected: {hit.reason}")
-                yield hit
-
-        hits = tapped(iter_hits(run, settings.hits or HitSettings()))
-        try:
-            frf = compute_frf(run, hits, estimator=settings.estimator, window=settings.window or WindowSettings(),
-                              precision=settings.fft_precision, max_frequency_hz=max_frequency_hz)
-        except IdentificationError as exc:
-            text = str(exc)
-            warnings.append(text if text.startswith(f"run '{run.name}'") else f"run '{run.name}': {text}")
-            if failed is not None:
-                failed.extend(rows)
-            continue
-        n_ok = sum(r["accepted"] for r in rows)
-        if n_ok < settings.min_accepted_hits:
-            warnings.append(f"run '{run.name}': only {n_ok} accepted hit(s); uncertainties are unreliable")
-        yield run, frf, rows
+    @property
+    def warnings(self) -> tuple:
+        """The stage's warnings in the order identify reports them: refits, the final fit, the faults."""
+        faults = self.check.warnings if self.check is not None else ()
+        return (*self.notes, *self.passed.warnings, *faults)
 
 
-def file_frfs(frf_file, settings: IdentifySettings, warnings: list):
-    """Yield (run, FrfSet, no hit rows) for every run of an FRF file; what it lacks goes to ``warnings``.
-
-    The modal stage then runs on them as on :func:`run_frfs`' FRFs. Another
-    estimator than the file's is used where its jackknife sums allow.
-    """
-    warnings.extend(frf_file.notes)
-    if settings.window is not None:
-        warnings.append("the window settings do not apply: the file holds FRFs already computed")
-    for run, frf in zip(frf_file.recording.runs, frf_file.frfsets):
-        if settings.estimator != frf.estimator and frf.estimator in ("H1", "H2", "Hv"):  # else: not said
-            if frf.n_groups >= 1:
-                frf = frf.with_estimator(settings.estimator)
-            else:
-                warnings.append(f"run '{run.name}': the file holds {frf.estimator} FRFs; estimator "
-                                f"{settings.estimator} needs the spectral sums (not in the file)")
-        yield run, frf, []
+# --------------------------------------------------------------------------- the pipeline
 
 
 def identify(path, guide=None, settings: IdentifySettings | None = None) -> Identification:
     """Identify the joint modes and K_V, K_H, c_V, c_H of one recording (or of FRFs measured from one).
+
+    One sequence of stages, each taking values and returning them (warnings
+    inside): recording -> hits -> FRFs (:func:`frf_stage`) -> modal fit,
+    shapes and labels (:func:`modal_fit`) -> sensor check (:func:`sensor_check`,
+    a fault corrected re-enters at the FRF stage: :func:`corrected_frfs`)
+    -> force levels (:func:`run_results`) -> parameters and gate (:func:`conclude`).
 
     Parameters
     ----------
@@ -327,144 +314,378 @@ def identify(path, guide=None, settings: IdentifySettings | None = None) -> Iden
     IdentificationError
         Valid file, but no result can be trusted: every hit rejected, no joint mode found (exit 1).
     """
-    from guidefit.io.axes import frame_hint
     from guidefit.io.frf_files import FrfFile, read_input
-    from guidefit.model import vibration as vib
-    from guidefit.model.guides import Guide, load_guide
 
     settings = settings or IdentifySettings()
     source = read_input(path)
     from_frfs = isinstance(source, FrfFile)
     recording = source.recording if from_frfs else source
+    guide, model = guide_and_model(recording, guide)
+    frfs = frf_stage(source, settings, frf_top_hz(model, settings))
+    if not frfs.collected:
+        raise identification_failure(f"{path}: no run gave an FRF", frfs.warnings)
+    fit = modal_fit(frfs.collected, guide, model, settings)
+    fit = sensor_check(fit, recording, guide, model, settings, recompute=not from_frfs)
+    runs, level_warnings = run_results(fit, [run.name for run, _, _ in frfs.collected], settings)
+    warnings = (*frfs.warnings, *fit.warnings, *level_warnings)
+    return conclude(path, recording, guide, model, settings, fit, runs, warnings,
+                    failed_rows=frfs.failed_rows, hits_checked=not from_frfs)
+
+
+def guide_and_model(recording, guide=None):
+    """The guide (``guide``, else the recording's, else MRB35) and its nominal modal solution."""
+    from guidefit.model import vibration as vib
+    from guidefit.model.guides import Guide, load_guide
+
     if not isinstance(guide, Guide):
         guide = load_guide(guide or recording.guide or "MRB35")
-    model = vib.solve_modes(vib.model_from_guide(guide))
-    if settings.method == "global":
-        return _identify_global(path, source, guide, model, settings)
-    warnings: list[str] = []
+    return guide, vib.solve_modes(vib.model_from_guide(guide))
+
+
+#: identify's FRFs end at this multiple of the band's nominal top (:func:`frf_top_hz`)
+FRF_TOP_FACTOR = 3.0
+
+
+def frf_top_hz(model, settings) -> float:
+    """The highest frequency identify's FRFs need: :data:`FRF_TOP_FACTOR` x the band's nominal
+    top (``settings.f_max_hz``, else 1.3 x the model's highest carriage mode).
+
+    A decision of the pipeline from the model and the settings, made before
+    any FRF exists. The modal stage's band
+    (:func:`guidefit.modal_stage.global_band`) is widened to at most twice
+    that top and never past 0.8 x the last bin, the per-mode checks look
+    below it, so FRFs to 3x the top give every decision the bins it has with
+    every bin; the bins above (at 200 kHz, about 70 % of them) are not summed
+    (the spectral sums of every hit cost more than its FFT).
+    """
+    nominal = settings.f_max_hz or 1.3 * float(np.max(model.frequencies_hz))
+    return FRF_TOP_FACTOR * float(nominal)
+
+
+# --------------------------------------------------------------------------- stage: FRFs
+
+
+def frf_stage(source, settings: IdentifySettings, max_frequency_hz: float | None = None) -> FrfStage:
+    """The FRFs of every run: from a recording's hits (:func:`run_frfs`, up to ``max_frequency_hz``) or
+    as an FRF file holds them (:func:`file_frfs`)."""
+    from guidefit.io.frf_files import FrfFile
+
+    if isinstance(source, FrfFile):
+        return file_frfs(source, settings)
+    return run_frfs(source, settings, max_frequency_hz)
+
+
+def run_frfs(recording, settings: IdentifySettings, max_frequency_hz: float | None = None) -> FrfStage:
+    """The FRFs of every run of a recording that gives them, with the warnings of its hits.
+
+    Hits stream from the file into the spectral sums (bounded memory); each
+    rejected hit is listed with its reason. ``max_frequency_hz``: the FRFs
+    end there (:func:`guidefit.frf.compute_frf`). The hit rows of a run that
+    gives no FRF are in ``failed_rows``.
+    """
+    from guidefit.errors import RecordingError
+
+    collected, failed, warnings = [], [], []
+    for run in recording.runs:
+        if not run.response_indices:
+            raise RecordingError(f"{run.file}: run '{run.name}': no acceleration channel; an FRF needs "
+                                 "'force' and at least one 'acc_<point>_<axis>'")
+        frf, rows, notes = _run_frf(run, settings, max_frequency_hz)
+        warnings.extend(notes)
+        if frf is None:
+            failed.extend(rows)
+        else:
+            collected.append((run, frf, rows))
+    return FrfStage(tuple(collected), tuple(failed), tuple(warnings))
+
+
+def _run_frf(run, settings: IdentifySettings, max_frequency_hz):
+    """One run's (FrfSet or None, hit rows, warnings): each rejected hit, a run without an FRF, too few hits."""
+    from guidefit.hits import HitSettings, iter_hits
+
+    rows: list[dict] = []
+    notes: list[str] = []
+
+    def tapped(it):
+        for hit in it:
+            rows.append(_hit_row(run.name, hit))
+            if not hit.accepted:
+                notes.append(f"run '{run.name}' hit {hit.index}: rejected: {hit.reason}")
+            yield hit
+
+    try:
+        frf = _compute_frf(run, tapped(iter_hits(run, settings.hits or HitSettings())), settings,
+                           max_frequency_hz)
+    except IdentificationError as exc:
+        text = str(exc)
+        notes.append(text if text.startswith(f"run '{run.name}'") else f"run '{run.name}': {text}")
+        return None, rows, notes
+    n_ok = sum(r["accepted"] for r in rows)
+    if n_ok < settings.min_accepted_hits:
+        notes.append(f"run '{run.name}': only {n_ok} accepted hit(s); uncertainties are unreliable")
+    return frf, rows, notes
+
+
+def _compute_frf(run, hits, settings: IdentifySettings, max_frequency_hz):
+    """:func:`guidefit.frf.compute_frf` with identify's estimator, windows and FFT precision."""
+    from guidefit.frf import WindowSettings, compute_frf
+
+    return compute_frf(run, hits, estimator=settings.estimator, window=settings.window or WindowSettings(),
+                       precision=settings.fft_precision, max_frequency_hz=max_frequency_hz)
+
+
+def file_frfs(frf_file, settings: IdentifySettings) -> FrfStage:
+    """The FRFs of every run of an FRF file (no hit rows); what the file lacks is in ``warnings``.
+
+    The modal stage then runs on them as on :func:`run_frfs`' FRFs. Another
+    estimator than the file's is used where its jackknife sums allow.
+    """
+    warnings = list(frf_file.notes)
+    if settings.window is not None:
+        warnings.append("the window settings do not apply: the file holds FRFs already computed")
+    collected = []
+    for run, frf in zip(frf_file.recording.runs, frf_file.frfsets):
+        if settings.estimator != frf.estimator and frf.estimator in ("H1", "H2", "Hv"):  # else: not said
+            if frf.n_groups >= 1:
+                frf = frf.with_estimator(settings.estimator)
+            else:
+                warnings.append(f"run '{run.name}': the file holds {frf.estimator} FRFs; estimator "
+                                f"{settings.estimator} needs the spectral sums (not in the file)")
+        collected.append((run, frf, []))
+    return FrfStage(tuple(collected), (), tuple(warnings))
+
+
+@dataclass(frozen=True)
+class RunChannels:
+    """A run read with only some of its channels: what :func:`guidefit.frf.compute_frf` reads of a run
+    (name, rate, channels, force column, record layout, sample dtype), and its hits with the other
+    columns left out (:meth:`hits`). How a sensor-fault correction computes a run's FRFs again without
+    a channel that reads another axis (:func:`corrected_frfs`)."""
+
+    run: object  # guidefit.recording.Run
+    keep: tuple  # column indices kept, in order; the force column among them
+
+    @classmethod
+    def without(cls, run, names) -> RunChannels:
+        """``run`` without the channels named in ``names``."""
+        return cls(run, tuple(i for i, ch in enumerate(run.channels) if ch.name not in names))
+
+    @property
+    def name(self) -> str:
+        return self.run.name
+
+    @property
+    def channels(self) -> tuple:
+        return tuple(self.run.channels[i] for i in self.keep)
+
+    @property
+    def force_index(self) -> int:
+        return self.keep.index(self.run.force_index)
+
+    @property
+    def sample_rate_hz(self) -> float:
+        return self.run.sample_rate_hz
+
+    @property
+    def pretrigger_samples(self) -> int | None:
+        return self.run.pretrigger_samples
+
+    @property
+    def layout(self) -> str:
+        return self.run.layout
+
+    @property
+    def n_samples(self) -> int:
+        return self.run.n_samples
+
+    @property
+    def n_hits_stored(self) -> int:
+        return self.run.n_hits_stored
+
+    @property
+    def sample_dtype(self):
+        return self.run.sample_dtype
+
+    def hits(self, settings: IdentifySettings):
+        """The run's hits (:func:`guidefit.hits.iter_hits`), each accepted one with the kept columns only."""
+        from guidefit.hits import HitSettings, iter_hits
+
+        keep = list(self.keep)
+        for hit in iter_hits(self.run, settings.hits or HitSettings()):
+            yield hit if hit.data is None else replace(hit, data=hit.data[:, keep])
+
+
+def corrected_frfs(collected, faults, settings: IdentifySettings, recompute: bool = True) -> tuple:
+    """The declared step by which a sensor-fault correction re-enters the pipeline at the FRF stage.
+
+    Takes the FRF stage's (run, FrfSet, hit rows) and the faults
+    (:class:`guidefit.consistency.SensorFault`) and returns them corrected
+    (:func:`guidefit.consistency.corrected_frf`: a scale divided out, a
+    wrong-axis channel left out). With ``recompute`` (time data) a run with
+    a wrong-axis channel has its FRFs computed again without it
+    (:class:`RunChannels`), so that channel no longer pulls the automatic
+    exponential window (chosen from every response's decay) either.
+    """
+    from guidefit import consistency
+    from guidefit.frf import top_of
+
+    out = []
+    for run, frf, rows in collected:
+        if not any(f.channel in {ch.name for ch in run.channels} for f in faults):
+            out.append((run, frf, rows))
+            continue
+        drop = consistency.axis_fault_channels(faults, run.channels)
+        if drop and recompute:
+            view = RunChannels.without(run, drop)
+            frf = _compute_frf(view, view.hits(settings), settings, top_of(frf))
+        out.append((run, consistency.corrected_frf(frf, faults), rows))
+    return tuple(out)
+
+
+# --------------------------------------------------------------------------- stage: modal fit, shapes, labels
+
+
+def modal_fit(collected, guide, model, settings: IdentifySettings) -> ModalFit:
+    """One modal model of all runs (:func:`_global_pass`), with its declared refit for force levels.
+
+    Runs that are harder force levels of another run (:func:`_force_level_runs`)
+    whose modes move with the force (:func:`_levels_agree`: contacts soften
+    with amplitude) are left out of the shared-pole fit, which is made again
+    without them; a note says so for each.
+    """
+    first = _global_pass(collected, guide, model, settings)
+    harder = _force_level_runs(collected)
+    if not harder or _levels_agree(first.modal, harder):
+        return ModalFit(tuple(collected), (), first)
+    notes = tuple(f"run '{name}': the same hit point and direction as a softer run at {ratio:.1f}x its mean hit "
+                  "force, and its modes move with the force (contacts soften with amplitude): a force level, left "
+                  "out of the shared-pole fit; explain compares it through the force-level model"
+                  for name, ratio in harder.items())
+    kept = tuple(item for item in collected if item[0].name not in harder)
+    levels_only = tuple(item for item in collected if item[0].name in harder)
+    return ModalFit(kept, levels_only, _global_pass(kept, guide, model, settings), notes)
+
+
+def _global_pass(collected, guide, model, settings) -> ModalPass:
+    """One global fit of the (run, FrfSet, hit rows) triples: the ModalResult (None when it failed, the
+    reason in the warnings) and each run's RunResult with its views of the shared modes (force levels
+    are added by :func:`run_results`, on the final fit)."""
+    from guidefit import modal_stage
+
+    frf_by_run = {run.name: frf for run, frf, _ in collected}
+    geometry = {run.name: modal_stage.geometry_of(run, frf) for run, frf, _ in collected}
+    try:
+        res = modal_stage.identify_frfs(frf_by_run, geometry, guide, settings, model=model)
+        warnings = res.warnings
+    except IdentificationError as exc:
+        res, warnings = None, (str(exc),)
     runs = []
-    all_modes: list[IdentifiedMode] = []
-    failed_rows: list[dict] = []
-    frfs = file_frfs(source, settings, warnings) if from_frfs else run_frfs(recording, settings, warnings,
-                                                                           failed_rows)
-    for run, frf, rows in frfs:
-        modes = _fit_run(run, frf, guide, model, settings, warnings)
-        all_modes.extend(modes)
-        levels = _force_levels(run, frf, rows, modes, settings, warnings) if settings.force_levels else []
-        runs.append(RunResult(run.name, frf, rows, modes, tuple(run.excitation_direction),
-                              frf_channels(run, frf), levels))
-    if not runs:
-        raise identification_failure(f"{path}: no run gave an FRF", warnings)
-    axes = {r.name: int(np.argmax(np.abs(r.excitation_direction))) for r in runs}
-    # sensor consistency and plausibility gate (guidefit.consistency): a channel that does not fit rigid
-    # carriage motion is named and its runs fitted again with it corrected; the gate below withholds K and c
+    for run, frf, rows in collected:
+        views = []
+        if res is not None:
+            for m in res.modes + res.extras:
+                k = m.global_index
+                if run.name in res.fit.runs and res.per_run.get(run.name, [None] * (k + 1))[k] is not None:
+                    views.append(replace(m, run=run.name, fit=res.fit.run_mode(k, run.name),
+                                         shape=m.shapes.get(run.name, m.shape)))
+        runs.append(RunResult(run.name, frf, rows, views, tuple(run.excitation_direction),
+                              frf_channels(run, frf)))
+    return ModalPass(res, tuple(runs), tuple(warnings))
+
+
+# --------------------------------------------------------------------------- stage: sensor check
+
+
+def sensor_check(fit: ModalFit, recording, guide, model, settings: IdentifySettings, recompute=True) -> ModalFit:
+    """The global shapes checked for sensors that do not fit rigid carriage motion
+    (:func:`guidefit.consistency.check_global`).
+
+    A faulty channel is named, its FRFs corrected (:func:`corrected_frfs`,
+    ``recompute``: from the hits again where a channel is left out) and the
+    global fit made again; the first fit's warnings go with it. ``check``
+    of the result holds the faults and the shape sets behind the gate.
+    """
     from guidefit import consistency
 
-    sensors = consistency.check_sensors(runs, all_modes, recording, guide, model, settings,
-                                        refit=lambda run, frf: _fit_run(run, frf, guide, model, settings, []))
-    runs, all_modes = sensors.runs, sensors.modes
-    warnings.extend(sensors.warnings)
-    modes, extras, missing = _select(all_modes, model, warnings, axes)
-    if settings.jackknife:
-        modes = _with_jackknife(modes, {r.name: r.frf for r in runs})
-    joint = {k: next((m for m in modes if m.label == lab), None) for k, lab in JOINT_LABELS.items()}
-    if joint["V"] is None and joint["H"] is None:
-        raise identification_failure(f"{path}: neither the vertical nor the horizontal joint mode was found", warnings,
-                                     hint=frame_hint(recording))
-    _quality_warnings(modes, settings, warnings)
-    _excitation_warnings(modes, {r.name: r.frf for r in runs}, warnings)
-    params = joint_parameters(guide.mass_kg, joint)
-    warnings.extend(consistency.unknown_hit_warnings(recording))
-    gate = consistency.plausibility(modes, missing, sensors.sets, model)
-    warnings.extend(consistency.mass_warnings(modes, sensors.sets, vib.carriage_mass_matrix(
-        vib.model_from_guide(guide)), guide.mass_kg, model))
-    if gate is not None:
-        gate += frame_hint(recording)
-        params = joint_parameters(guide.mass_kg, {})
-    return Identification(str(path), guide, tuple(runs), tuple(modes), params, tuple(warnings),
-                          tuple(extras), tuple(missing), tuple(failed_rows), hits_checked=not from_frfs,
-                          gate=gate, sensor_faults=sensors.faults)
+    check = consistency.check_global(fit.passed.runs, recording, guide, settings)
+    if not check.faults:
+        return replace(fit, check=check)
+    collected = corrected_frfs(fit.collected, check.faults, settings, recompute)
+    again = _global_pass(collected, guide, model, settings)
+    check = consistency.check_global(again.runs, recording, guide, settings, faults=check.faults)
+    return replace(fit, collected=collected, passed=again, check=check)
 
 
-def _identify_global(path, source, guide, model, settings) -> Identification:
-    """:func:`identify` with one modal model of all runs (:func:`guidefit.modal_stage.identify_frfs`).
+# --------------------------------------------------------------------------- stage: run results, force levels
 
-    ``source`` is a recording, or an FRF file (:class:`~guidefit.io.frf_files.FrfFile`: no hit checks).
-    The global shapes are checked for sensors that do not fit rigid carriage motion
-    (:mod:`guidefit.consistency`): a faulty channel is named, its FRFs corrected (a scale
-    divided out, a wrong axis left out) and the global fit made again; the plausibility gate
-    then withholds K and c when the modes are not those of a carriage on this guide.
+
+def run_results(fit: ModalFit, order, settings: IdentifySettings) -> tuple[list, tuple]:
+    """Every run's RunResult in the file's ``order`` (run names), the force levels fitted apart among
+    them (no modes), with their per-force-bin frequencies when ``settings.force_levels``
+    (:func:`guidefit.identify_runs._force_levels`, on the final fit), and the warnings of those refits."""
+    runs = list(fit.passed.runs)
+    runs += [RunResult(run.name, frf, rows, [], tuple(run.excitation_direction), frf_channels(run, frf), [])
+             for run, frf, rows in fit.levels_only]
+    rank = {name: i for i, name in enumerate(order)}
+    runs.sort(key=lambda r: rank[r.name])
+    if not settings.force_levels:
+        return runs, ()
+    run_of = {run.name: run for run, _, _ in (*fit.collected, *fit.levels_only)}
+    out, warnings = [], []
+    for r in runs:
+        if r.modes:
+            levels, notes = _force_levels(run_of[r.name], r.frf, r.hits, r.modes, settings)
+            warnings.extend(notes)
+            r = replace(r, force_levels=levels)
+        out.append(r)
+    return out, tuple(warnings)
+
+
+# --------------------------------------------------------------------------- stage: parameters and gate
+
+
+def conclude(path, recording, guide, model, settings: IdentifySettings, fit: ModalFit, runs, warnings,
+             failed_rows=(), hits_checked: bool = True) -> Identification:
+    """Joint parameters (Eq. 24-29), the plausibility gate and the result, from the final fit.
+
+    ``warnings`` are those of the stages before; the quality, excitation,
+    hit-point and modal-mass warnings follow them.
+
+    Raises
+    ------
+    IdentificationError
+        No mode at all was found, nor the vertical or horizontal joint mode.
     """
     from guidefit import consistency
     from guidefit.io.axes import frame_hint
-    from guidefit.io.frf_files import FrfFile
 
-    warnings: list[str] = []
-    failed_rows: list[dict] = []
-    from_frfs = isinstance(source, FrfFile)
-    recording = source.recording if from_frfs else source
-    from guidefit.modal_stage import frf_top_hz
-
-    collected = list(file_frfs(source, settings, warnings) if from_frfs
-                     else run_frfs(source, settings, warnings, failed_rows, frf_top_hz(model, settings)))
-    if not collected:
-        raise identification_failure(f"{path}: no run gave an FRF", warnings)
-    order = {run.name: i for i, (run, _, _) in enumerate(collected)}
-    run_of = {run.name: run for run, _, _ in collected}
-    first = list(warnings)
-    res, runs = _global_pass(collected, guide, model, settings, first)
-    levels_only = []
-    harder = _force_level_runs(collected)
-    if harder and not _levels_agree(res, harder):  # amplitude-dependent: the harder levels fitted apart
-        levels_only = [item for item in collected if item[0].name in harder]
-        collected = [item for item in collected if item[0].name not in harder]
-        for name, ratio in harder.items():
-            warnings.append(f"run '{name}': the same hit point and direction as a softer run at {ratio:.1f}x its "
-                            "mean hit force, and its modes move with the force (contacts soften with amplitude): "
-                            "a force level, left out of the shared-pole fit; explain compares it through the "
-                            "force-level model")
-        first = list(warnings)
-        res, runs = _global_pass(collected, guide, model, settings, first)
-    check = consistency.check_global(runs, recording, guide, settings)
-    if check.faults:  # the fit again without the faults; the first pass's warnings are dropped with it
-        collected = consistency.corrected_runs(collected, check.faults, settings, recompute=not from_frfs)
-        res, runs = _global_pass(collected, guide, model, settings, warnings)
-        check = consistency.check_global(runs, recording, guide, settings, faults=check.faults)
-    else:
-        warnings = first
-    warnings.extend(f.message for f in check.faults)
-    runs += [RunResult(run.name, frf, rows, [], tuple(run.excitation_direction), frf_channels(run, frf), [])
-             for run, frf, rows in levels_only]
-    runs.sort(key=lambda r: order[r.name])
-    if settings.force_levels:  # on the final fit only (a pass made again discards its views)
-        runs = [replace(r, force_levels=_force_levels(run_of[r.name], r.frf, r.hits, r.modes, settings, warnings))
-                if r.modes else r for r in runs]
+    res = fit.passed.modal
     modes = res.modes if res is not None else []
     joint = {k: next((m for m in modes if m.label == lab), None) for k, lab in JOINT_LABELS.items()}
     neither = joint["V"] is None and joint["H"] is None
     if neither and (res is None or not (res.modes or res.extras)):
         raise identification_failure(f"{path}: neither the vertical nor the horizontal joint mode was found", warnings,
                                      hint=frame_hint(recording))
-    frf_by_run = {r.name: r.frf for r in runs}
-    _quality_warnings(modes, settings, warnings)
-    _excitation_warnings(modes, frf_by_run, warnings)
+    sets = fit.check.sets
+    warnings = (*warnings, *_quality_warnings(modes, settings),
+                *_excitation_warnings(modes, {r.name: r.frf for r in runs}),
+                *consistency.unknown_hit_warnings(recording))
     params = joint_parameters(guide.mass_kg, joint)
-    warnings.extend(consistency.unknown_hit_warnings(recording))
     # modes that are found but not named (ambiguous) count as missing for the gate
     not_named = [lab for lab in model.labels if lab not in {m.label for m in modes} and not lab.startswith("support")]
-    gate = consistency.plausibility(modes, not_named, check.sets, model)
+    gate = consistency.plausibility(modes, not_named, sets, model)
     if gate is None and neither:  # modes found, none of them the vertical or the horizontal joint mode
         gate = (f"neither the vertical nor the horizontal joint mode was found among the {len(res.modes)} "
                 f"labelled and {len(res.extras)} other modes: the recording does not look like a carriage on "
                 "this guide, or its sensors cannot tell its modes apart (guidefit plan shows what they can)")
-    warnings.extend(consistency.global_mass_warnings(runs, check.sets, guide, model))
+    warnings = (*warnings, *consistency.global_mass_warnings(runs, sets, guide, model))
     if gate is not None:
         gate += frame_hint(recording)
         params = joint_parameters(guide.mass_kg, {})
-    unidentified = () if gate is not None else _unidentified(joint, model, check.sets, [*modes, *res.extras])
+    unidentified = () if gate is not None else _unidentified(joint, model, sets, [*modes, *res.extras])
     return Identification(str(path), guide, tuple(runs), tuple(modes), params, tuple(warnings),
-                          tuple(res.extras), tuple(res.missing), tuple(failed_rows), hits_checked=not from_frfs,
-                          modal=res, gate=gate, sensor_faults=check.faults, unidentified=unidentified)
+                          tuple(res.extras), tuple(res.missing), tuple(failed_rows), hits_checked=hits_checked,
+                          modal=res, gate=gate, sensor_faults=fit.check.faults, unidentified=unidentified)
 
 
 def _unidentified(joint: dict, model, sets, modes) -> tuple:  # modes: the named ones and the extras
@@ -483,6 +704,8 @@ def _unidentified(joint: dict, model, sets, modes) -> tuple:  # modes: the named
                        f"was {why} (the warnings say why)")
     return tuple(out)
 
+
+# --------------------------------------------------------------------------- force levels fitted apart
 
 #: runs of one hit point and direction whose mean peak forces differ by this factor are force levels
 LEVEL_FORCE_RATIO = 1.5
@@ -543,49 +766,48 @@ def _levels_agree(res, harder: dict) -> bool:
     return True
 
 
-def _global_pass(collected, guide, model, settings, warnings: list):
-    """One global fit of the (run, FrfSet, hit rows) triples: the ModalResult (None when it failed,
-    the reason in ``warnings``) and each run's RunResult with its views of the shared modes
-    (force levels are added by the caller, on the final fit)."""
-    from guidefit import modal_stage
-
-    frf_by_run = {run.name: frf for run, frf, _ in collected}
-    geometry = {run.name: modal_stage.geometry_of(run, frf) for run, frf, _ in collected}
-    try:
-        res = modal_stage.identify_frfs(frf_by_run, geometry, guide, settings, warnings, model=model)
-    except IdentificationError as exc:
-        warnings.append(str(exc))
-        res = None
-    runs = []
-    for run, frf, rows in collected:
-        views = []
-        if res is not None:
-            for m in res.modes + res.extras:
-                k = m.global_index
-                if run.name in res.fit.runs and res.per_run.get(run.name, [None] * (k + 1))[k] is not None:
-                    views.append(replace(m, run=run.name, fit=res.fit.run_mode(k, run.name),
-                                         shape=m.shapes.get(run.name, m.shape)))
-        runs.append(RunResult(run.name, frf, rows, views, tuple(run.excitation_direction),
-                              frf_channels(run, frf)))
-    return res, runs
-
-
 def frf_of_recording(path, settings: IdentifySettings | None = None):
     """FRF sets of every run of any recording (guideway or not) and the warnings.
 
     Raises :class:`IdentificationError` when no run gives an FRF.
     """
+    from guidefit.io.frf_files import read_input
+
+    settings = settings or IdentifySettings()
+    frfs = frf_stage(read_input(path), settings)
+    if not frfs.collected:
+        raise identification_failure(f"{path}: no run gave an FRF", frfs.warnings)
+    return [frf for _run, frf, _rows in frfs.collected], list(frfs.warnings)
+
+
+# --------------------------------------------------------------------------- diagnostics
+
+
+def per_run_fits(path, guide=None, settings: IdentifySettings | None = None):
+    """The per-run diagnostic: each run's FRFs (every bin) fitted on their own, one estimate per label.
+
+    What identify did before the global fit (:func:`guidefit.identify_runs.fit_runs`:
+    per-run curve fits, labels from each run alone, the estimate with the
+    smallest frequency uncertainty per label); for comparison with
+    :func:`identify` (``benchmarks/bench_global.py``). No sensor check, gate
+    or joint parameters.
+
+    Returns
+    -------
+    guidefit.identify_runs.RunFits
+        ``modes``, ``extras``, ``missing`` and ``warnings`` (the FRF stage's first).
+    """
+    from guidefit.identify_runs import fit_runs
     from guidefit.io.frf_files import FrfFile, read_input
 
     settings = settings or IdentifySettings()
-    warnings: list[str] = []
     source = read_input(path)
-    frfs = file_frfs(source, settings, warnings) if isinstance(source, FrfFile) else run_frfs(source, settings,
-                                                                                              warnings)
-    frfsets = [frf for _run, frf, _rows in frfs]
-    if not frfsets:
-        raise identification_failure(f"{path}: no run gave an FRF", warnings)
-    return frfsets, warnings
+    guide, model = guide_and_model(source.recording if isinstance(source, FrfFile) else source, guide)
+    frfs = frf_stage(source, settings)
+    if not frfs.collected:
+        raise identification_failure(f"{path}: no run gave an FRF", frfs.warnings)
+    fits = fit_runs(frfs.collected, guide, model, settings)
+    return replace(fits, warnings=frfs.warnings + fits.warnings)
 
 
 from guidefit._api import make_callable  # noqa: E402

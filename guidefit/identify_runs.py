@@ -1,24 +1,30 @@
-"""The per-run modal stage of :mod:`guidefit.identify`: fits, refits, force levels, selection, warnings.
+"""Per-run stage code of :mod:`guidefit.identify`: force levels, narrow-band refits, warnings, and the
+per-run diagnostic.
 
-One run's modal fit (:func:`_fit_run`: per-run curve fits in the search band,
-with refits in a narrow band and the delete-a-group jackknife), the force-level
-refits (:func:`_force_levels`), the choice among candidates of several runs
-(:func:`_select`) and the quality and excitation warnings that both the
-per-run and the global path add. They are separate from
-:mod:`guidefit.identify`, which holds the joint parameters (Eq. 24-29), the
-result types and the pipeline that calls these stages, so that the pipeline
-reads in one module and the stage code in another. Nothing here imports
-:mod:`guidefit.identify`; the names used elsewhere stay importable from it.
+The identify pipeline (:func:`guidefit.identify.identify`) fits one modal
+model of all runs; what it takes from here works per run on that model's
+modes: the force-level refits (:func:`_force_levels`, each mode refitted in
+its narrow band per hit-force bin, :func:`_refit_in_band`) and the quality
+and excitation warnings on the joint modes. Every function returns its
+warnings (no list is passed in to be changed).
+
+:func:`fit_runs` is a diagnostic beside the pipeline, not a path of it: each
+run's FRFs fitted on their own by per-run curve fits (:func:`_fit_run`),
+one estimate per label (:func:`_select`) with the delete-a-group jackknife
+of the joint modes (:func:`_with_jackknife`), as identify did before the
+global fit (``benchmarks/bench_global.py`` compares the two). Nothing here
+imports :mod:`guidefit.identify`.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from guidefit.errors import IdentificationError
+from guidefit.labels import sensor_matrix
 from guidefit.modeshapes import (
     UNNAMED_LABELS,
     IdentifiedMode,
@@ -27,10 +33,55 @@ from guidefit.modeshapes import (
     energy_shares,
     real_shape,
     rigid_body_motion,
-    sensor_matrix,
 )
 
 JOINT_LABELS = {"V": "vertical", "H": "roll_low"}
+
+
+@dataclass(frozen=True)
+class RunFits:
+    """What :func:`fit_runs` gives: one estimate per label, the extra modes, the model modes not seen,
+    and the warnings of the fits and the selection."""
+
+    modes: tuple
+    extras: tuple
+    missing: tuple
+    warnings: tuple
+
+
+def fit_runs(collected, guide, model, settings) -> RunFits:
+    """The per-run diagnostic: every run's FRFs fitted on their own, one estimate per label.
+
+    Parameters
+    ----------
+    collected : sequence of (Run, FrfSet, hit rows)
+        The FRF stage's runs (:func:`guidefit.identify.run_frfs`).
+    guide, model
+        The guide and its nominal modal solution (labels, search band).
+    settings : guidefit.identify.IdentifySettings
+        Reads the band limits and ``jackknife``.
+
+    Returns
+    -------
+    RunFits
+        Each label from the run hit along the axis that drives it, among
+        those the estimate with the smallest relative frequency uncertainty;
+        joint modes with the jackknife in their std. No sensor check, gate or
+        joint parameters: the result of :func:`guidefit.identify.identify`
+        is the global fit's.
+    """
+    warnings: list[str] = []
+    all_modes, frf_by_run, axes = [], {}, {}
+    for run, frf, _rows in collected:
+        modes, notes = _fit_run(run, frf, guide, model, settings)
+        warnings.extend(notes)
+        all_modes.extend(modes)
+        frf_by_run[run.name] = frf
+        axes[run.name] = int(np.argmax(np.abs(run.excitation_direction)))
+    modes, extras, missing, notes = _select(all_modes, model, axes)
+    if settings.jackknife:
+        modes = _with_jackknife(modes, frf_by_run)
+    return RunFits(tuple(modes), tuple(extras), tuple(missing), tuple(warnings) + tuple(notes))
 
 
 def _search_band(model, run, settings) -> tuple[float, float]:
@@ -220,24 +271,27 @@ def _with_jackknife(modes: list, frf_by_run: dict) -> list:
 MIN_BINS_IN_BAND = 8  # fewer FRF bins than this in the search band: no mode fit is attempted
 
 
-def _fit_run(run, frf, guide, model, settings, warnings: list) -> list[IdentifiedMode]:
+def _fit_run(run, frf, guide, model, settings) -> tuple[list[IdentifiedMode], list[str]]:
+    """One run's modes by per-run curve fits in the search band, labelled from that run alone, and the
+    warnings of the fit (band, resolution, :class:`guidefit.modes.ModeFitWarning`)."""
     from guidefit import curvefit
     from guidefit import frf as frf_mod
     from guidefit import modes as modes_mod
     from guidefit.model import vibration as vib
 
+    warnings: list[str] = []
     band = _search_band(model, run, settings)
     if not band[1] > band[0] * 1.05:
         warnings.append(f"run '{run.name}': sample rate {run.sample_rate_hz:g} Hz too low for the modes "
                         f"searched from {band[0]:.0f} Hz (needs at least {band[0] / 0.4:.0f} Hz)")
-        return []
+        return [], warnings
     freq = np.asarray(frf.frequency_hz)
     if np.count_nonzero((freq >= band[0]) & (freq <= band[1])) < MIN_BINS_IN_BAND:
         n = 2 * (len(freq) - 1)
         warnings.append(f"run '{run.name}': records of about {n} samples give {freq[-1] / max(len(freq) - 1, 1):.0f} Hz "
                         f"resolution, too coarse for the modes between {band[0]:.0f} and {band[1]:.0f} Hz "
                         f"(fewer than {MIN_BINS_IN_BAND} bins); longer records are needed")
-        return []
+        return [], warnings
     try:
         import warnings as _w
 
@@ -249,7 +303,7 @@ def _fit_run(run, frf, guide, model, settings, warnings: list) -> list[Identifie
                 warnings.append(f"run '{run.name}': {w.message}")
     except IdentificationError as exc:
         warnings.append(f"run '{run.name}': no mode found between {band[0]:.0f} and {band[1]:.0f} Hz ({exc})")
-        return []
+        return [], warnings
     fitted = sorted(fitted, key=lambda m: m.frequency_hz)
     sensors = sensor_matrix(frf_channels(run, frf))
     mass = vib.carriage_mass_matrix(vib.model_from_guide(guide))
@@ -294,11 +348,12 @@ def _fit_run(run, frf, guide, model, settings, warnings: list) -> list[Identifie
             half_power=_half_power_entry(frf, mode, tau), raw_damping_ratio=float(mode.damping_ratio),
             fit=mode, label_basis=dec.basis, label_note=dec.note, label_mac=dec.mac, label_scale=dec.scale,
         ))
-    return out
+    return out, warnings
 
 
-def _force_levels(run, frf, rows, modes, settings, warnings: list) -> list[dict]:
-    """Frequencies of the run's labelled modes per hit-force bin (terciles of the accepted hits).
+def _force_levels(run, frf, rows, modes, settings) -> tuple[list[dict], list[str]]:
+    """Frequencies of the run's labelled modes per hit-force bin (terciles of the accepted hits), and
+    the warning when a bin's FRF cannot be made (then no levels).
 
     Each bin's hits are averaged into their own FRF with the run's windows and
     each mode is refitted in its narrow band, its near neighbours subtracted
@@ -328,10 +383,10 @@ def _force_levels(run, frf, rows, modes, settings, warnings: list) -> list[dict]
     fitted = sorted((m for m in modes if m.label != "extra" and m.fit is not None), key=lambda m: m.frequency_hz)
     run_fits = [(m.fit, m.label) for m in modes if m.fit is not None]  # extra peaks pull a neighbour too
     if not fitted or len(accepted) < 2 * settings.force_bins:
-        return []
+        return [], []
     forces = np.array([r["peak_force_n"] for r in accepted])
     if forces.max() < settings.min_force_ratio * forces.min():
-        return []
+        return [], []
     window = frf_mod.WindowSettings(force_window_s=frf.force_window_s, exp_tau_s=frf.exp_window_tau_s) \
         if frf.exp_window_tau_s else frf_mod.WindowSettings(none=True)
     names = [ch.name for ch in frf_channels(run, frf)]
@@ -343,8 +398,7 @@ def _force_levels(run, frf, rows, modes, settings, warnings: list) -> list[dict]
             sub = frf_mod.compute_frf(run, hits, estimator=settings.estimator, window=window,
                                       precision=frf.fft_precision, max_frequency_hz=frf_mod.top_of(frf))
         except IdentificationError as exc:
-            warnings.append(f"run '{run.name}': force-level FRF failed ({exc})")
-            return []
+            return [], [f"run '{run.name}': force-level FRF failed ({exc})"]
         # a narrow band around each mode, the run's other modes subtracted or refitted with it: robust
         # against modes trading places, and a neighbour cannot pull it. A mode that this bin's hits do not
         # reproduce is then left out of its neighbours' refits: its all-hits fit would pull them instead
@@ -375,7 +429,7 @@ def _force_levels(run, frf, rows, modes, settings, warnings: list) -> list[dict]
                 level["damping_ratio"], level["damping_std"] = float(z_n), r.damping_std
                 level["shape"] = dict(zip(names, (float(v) for v in real_shape(r.modal_constants))))
             levels.append(level)
-    return levels
+    return levels, []
 
 
 MIN_RELATIVE_AMPLITUDE = 5e-3
@@ -418,8 +472,8 @@ def frf_channels(run, frf) -> list:
 _PREFERRED_AXIS = {"vertical": 1, "pitch": 1, "roll_low": 0, "yaw": 0}
 
 
-def _select(all_modes: list[IdentifiedMode], model, warnings: list, run_axes: dict | None = None):
-    """One estimate per label; the others are extra or duplicates.
+def _select(all_modes: list[IdentifiedMode], model, run_axes: dict | None = None):
+    """One estimate per label; the others are extra or duplicates: (modes, extras, missing, warnings).
 
     A label is taken from a run hit along the axis that drives it (vertical
     and pitch: a vertical run; roll_low and yaw: a lateral run) when such a
@@ -428,6 +482,7 @@ def _select(all_modes: list[IdentifiedMode], model, warnings: list, run_axes: di
     """
     chosen: dict[str, IdentifiedMode] = {}
     extras: list[IdentifiedMode] = []
+    warnings: list[str] = []
     run_axes = run_axes or {}
 
     def quality(m):
@@ -455,10 +510,13 @@ def _select(all_modes: list[IdentifiedMode], model, warnings: list, run_axes: di
     for lab in missing:
         warnings.append(f"model mode '{lab}' ({model.frequency_hz(lab):.0f} Hz) not observed in any run")
     modes = sorted(chosen.values(), key=lambda m: m.frequency_hz)
-    return modes, sorted(unique_extras, key=lambda m: m.frequency_hz), missing
+    return modes, sorted(unique_extras, key=lambda m: m.frequency_hz), missing, warnings
 
 
-def _quality_warnings(modes, settings, warnings: list) -> None:
+def _quality_warnings(modes, settings) -> list[str]:
+    """Warnings on the joint modes: coherence at the peak below ``settings.min_coherence``, half-power
+    points not found or too few bins between them."""
+    warnings = []
     for m in modes:
         if m.label not in JOINT_LABELS.values():
             continue
@@ -471,13 +529,15 @@ def _quality_warnings(modes, settings, warnings: list) -> None:
         elif hp["bins_in_band"] < 3:
             warnings.append(f"mode {m.label}: half-power band spans only {hp['bins_in_band']} bins; "
                             f"the curve-fit damping is the one to trust")
+    return warnings
 
 
 MAX_FORCE_DROP_DB = 20.0  # hammer practice: use the band where the force spectrum is within 20 dB of its peak
 
 
-def _excitation_warnings(modes, frf_by_run: dict, warnings: list) -> None:
-    """Warn when a joint mode lies where the hammer barely excites (e.g. a soft tip's spectral notch)."""
+def _excitation_warnings(modes, frf_by_run: dict) -> list[str]:
+    """Warnings for joint modes that lie where the hammer barely excites (e.g. a soft tip's spectral notch)."""
+    warnings = []
     for m in modes:
         frf = frf_by_run.get(m.run)
         sff = (getattr(frf, "group_sums", None) or {}).get("Sff")
@@ -492,3 +552,4 @@ def _excitation_warnings(modes, frf_by_run: dict, warnings: list) -> None:
             warnings.append(f"mode {m.label} at {m.frequency_hz:.1f} Hz: the hammer puts {drop} force there than at "
                             f"its spectral peak (limit {MAX_FORCE_DROP_DB:.0f} dB; a harder tip helps); the frequency "
                             "and damping may be off by more than their std")
+    return warnings

@@ -16,7 +16,7 @@ the labelled modes of one modal model with shared poles
    selection spread in the std).
 3. **Shapes across runs.** A mode's modal constants in run ``j`` are
    ``phi(r) phi(e_j)``: the carriage motion ``q`` (u, v, theta, psi, phi) seen
-   by the run's sensors (:func:`guidefit.identify.sensor_matrix` ``S_j``),
+   by the run's sensors (:func:`guidefit.labels.sensor_matrix` ``S_j``),
    scaled by the motion at the hit point ``c_j``. :func:`assemble_motion`
    fits ``m_j = c_j S_j q`` to all runs together (alternating least squares;
    then, when every run's hit point is known, ``c_j = g_j . q`` with
@@ -49,7 +49,7 @@ array([0.333, 0.   , 0.   , 0.   , 1.   ])
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -86,6 +86,7 @@ class ModalResult:
     fit: object  # guidefit.globalfit.GlobalFit
     per_run: dict = field(default_factory=dict)  # run -> [Mode or None per global mode]
     band_hz: tuple = ()
+    warnings: tuple = ()  # what the fit and the labeller found, one line each
 
 
 def geometry_of(run, frf) -> RunGeometry:
@@ -94,24 +95,6 @@ def geometry_of(run, frf) -> RunGeometry:
     return RunGeometry(run.name, tuple(by_name[c] for c in frf.channels), tuple(run.excitation_direction),
                        None if run.excitation_position_m is None else tuple(run.excitation_position_m),
                        getattr(run, "sample_rate_hz", None))
-
-
-#: identify's FRFs end at this multiple of the band's nominal top (:func:`frf_top_hz`)
-FRF_TOP_FACTOR = 3.0
-
-
-def frf_top_hz(model, settings) -> float:
-    """The highest frequency identify's FRFs need: :data:`FRF_TOP_FACTOR` x the band's nominal
-    top (``settings.f_max_hz``, else 1.3 x the model's highest carriage mode).
-
-    The band (:func:`global_band`) is widened to at most twice that top and
-    never past 0.8 x the last bin, the per-mode checks look below it, so FRFs
-    to 3x the top give every decision the bins it has with every bin; the bins
-    above (at 200 kHz, about 70 % of them) are not summed (the spectral sums
-    of every hit cost more than its FFT).
-    """
-    nominal = settings.f_max_hz or 1.3 * float(np.max(model.frequencies_hz))
-    return FRF_TOP_FACTOR * float(nominal)
 
 
 def global_band(model, frf_by_run: dict, geometry: dict, settings) -> tuple[float, float]:
@@ -338,8 +321,7 @@ def _driven_motion(q0, constants, sensors, drive, runs):
     return x if np.sum(resid(x) ** 2) <= np.sum(resid(start) ** 2) else start
 
 
-def identify_frfs(frf_by_run: dict, geometry: dict, guide, settings=None, warnings: list | None = None,
-                  model=None) -> ModalResult:
+def identify_frfs(frf_by_run: dict, geometry: dict, guide, settings=None, model=None) -> ModalResult:
     """Fit -> shapes -> labels of the modes of all runs together (the modal stage of identify).
 
     Parameters
@@ -350,14 +332,15 @@ def identify_frfs(frf_by_run: dict, geometry: dict, guide, settings=None, warnin
     guide : guidefit.model.guides.Guide
     settings : guidefit.identify.IdentifySettings, optional
         Reads ``f_min_hz``, ``f_max_hz`` (band limits, None: from model and data) and ``jackknife``.
-    warnings : list, optional
-        Problems found are appended (one line each).
+    model : guidefit.model.vibration.ModalSolution, optional
+        The guide's nominal modes (solved from ``guide`` when not given).
 
     Returns
     -------
     ModalResult
         ``modes`` hold the global estimate of every labelled mode (``run``:
-        the run that shows it most; ``estimates``: every run's own f and zeta).
+        the run that shows it most; ``estimates``: every run's own f and zeta);
+        ``warnings`` what the fit and the labeller found.
 
     Raises
     ------
@@ -367,32 +350,29 @@ def identify_frfs(frf_by_run: dict, geometry: dict, guide, settings=None, warnin
     from guidefit import globalfit
 
     with globalfit.one_blas_thread():  # small matrices only: see globalfit.one_blas_thread
-        return _identify_frfs(frf_by_run, geometry, guide, settings, warnings, model)
+        return _identify_frfs(frf_by_run, geometry, guide, settings, model)
 
 
-def _identify_frfs(frf_by_run, geometry, guide, settings, warnings, model) -> ModalResult:
+def _identify_frfs(frf_by_run, geometry, guide, settings, model) -> ModalResult:
     from guidefit import globalfit
+    from guidefit.labels import driving_row, sensor_matrix
     from guidefit.model import vibration as vib
 
     settings = settings or _DefaultSettings()
-    warnings = warnings if warnings is not None else []
     spec = vib.model_from_guide(guide)
     model = model or vib.solve_modes(spec)
     band = global_band(model, frf_by_run, geometry, settings)
     _check_band(band, frf_by_run, geometry)
     gf = globalfit.global_fit(frf_by_run, band, jackknife=settings.jackknife)
-    for name in gf.excluded_runs:
-        warnings.append(f"run '{name}': its FRFs are on another frequency grid; left out of the global fit")
+    excluded = tuple(f"run '{name}': its FRFs are on another frequency grid; left out of the global fit"
+                     for name in gf.excluded_runs)
     per_run = globalfit.run_estimates(gf, frf_by_run)
     mass = vib.carriage_mass_matrix(spec)
-    from guidefit.modeshapes import sensor_matrix
-
     sensors = {r: sensor_matrix(geometry[r].channels) for r in gf.runs}
-    from guidefit.labels import driving_row
-
     drive = {r: driving_row(geometry[r].excitation_direction, geometry[r].excitation_position_m) for r in gf.runs}
     candidates = [_candidate(gf, k, sensors, drive, mass) for k in range(len(gf.modes))]
-    return _labelled(gf, candidates, per_run, frf_by_run, geometry, model, warnings, band, guide.mass_kg)
+    res = _labelled(gf, candidates, per_run, frf_by_run, geometry, model, band, guide.mass_kg)
+    return replace(res, warnings=excluded + res.warnings)
 
 
 #: DOF indices (u, v, theta, psi, phi) of each kinetic-energy group
@@ -509,7 +489,9 @@ def _scale_warnings(ev, mass_kg: float) -> list[str]:
     return out
 
 
-def _labelled(gf, candidates, per_run, frf_by_run, geometry, model, warnings, band, mass_kg) -> ModalResult:
+def _labelled(gf, candidates, per_run, frf_by_run, geometry, model, band, mass_kg) -> ModalResult:
+    """The labelled modes of the global fit (:func:`guidefit.labels.label_modes`), with the labeller's
+    warnings (scale and sign, ambiguous, extra, missing) in ``ModalResult.warnings``."""
     from guidefit import labels as lab_mod
     from guidefit import modeshapes as ident
 
@@ -519,7 +501,7 @@ def _labelled(gf, candidates, per_run, frf_by_run, geometry, model, warnings, ba
     predicted = lab_mod.predicted_constants(model, views)
     ev = lab_mod.evidence(measured, views, model, predicted)
     decided = lab_mod.label_modes(measured, views, model, predicted, ev)
-    warnings.extend(_scale_warnings(ev, mass_kg))
+    warnings = _scale_warnings(ev, mass_kg)
     visible = dict(zip(model.labels, lab_mod.visible_modes(predicted)))
     modes, extras = [], []
     for c, dec in zip(candidates, decided):
@@ -579,7 +561,7 @@ def _labelled(gf, candidates, per_run, frf_by_run, geometry, model, warnings, ba
             warnings.append(f"model mode '{lab}' ({model.frequency_hz(lab):.0f} Hz) not observed in any run")
     missing = [lab for lab in missing if lab not in told]
     return ModalResult(sorted(modes, key=lambda m: m.frequency_hz), sorted(extras, key=lambda m: m.frequency_hz),
-                       missing, gf, per_run, band)
+                       missing, gf, per_run, band, tuple(warnings))
 
 
 def _candidate_labels(extras) -> dict:

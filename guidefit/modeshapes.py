@@ -1,8 +1,8 @@
 r"""Mode shapes at the sensors: rigid-body motion of the carriage, kinetic-energy shares, IdentifiedMode.
 
-Shared by :mod:`guidefit.identify` (which re-exports every name) and
-:mod:`guidefit.modal_stage`: each sensor's reading per unit carriage motion
-(u, v, theta, psi, phi), the least-squares motion behind a shape, the
+Shared by :mod:`guidefit.identify` and :mod:`guidefit.modal_stage`: the
+least-squares carriage motion (u, v, theta, psi, phi) behind a shape at the
+sensors (whose matrix is :func:`guidefit.labels.sensor_matrix`), the
 kinetic-energy shares of a motion, and :class:`IdentifiedMode`, the labelled
 mode of an identification (the labels come from :mod:`guidefit.labels`).
 
@@ -85,14 +85,6 @@ class IdentifiedMode:
             "carriage_energy_share": self.carriage_energy,
             "energy": dict(self.energy),
         }
-
-
-def sensor_matrix(channels) -> np.ndarray:
-    """(n_channels, 5): each sensor's reading per unit carriage motion; :func:`guidefit.labels.sensor_matrix`
-    (the one sensor matrix of guidefit), under its old name."""
-    from guidefit.labels import sensor_matrix as one
-
-    return one(channels)
 
 
 def real_shape(values) -> np.ndarray:

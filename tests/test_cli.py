@@ -162,3 +162,14 @@ def test_fft_precision_choices_are_the_librarys():
     for name in ("identify", "frf"):
         (option,) = [p for p in main.commands[name].params if p.name == "fft_precision"]
         assert tuple(option.type.choices) == PRECISIONS and option.default == "auto"
+
+
+def test_estimator_choices_are_the_frf_estimators():
+    """--estimator of identify and frf offers exactly guidefit.frf.ESTIMATORS (written once)."""
+    from guidefit.frf import ESTIMATORS
+
+    for command in ("identify", "frf"):
+        out = CliRunner().invoke(main, [command, "--help"])
+        assert out.exit_code == 0 and f"[{'|'.join(ESTIMATORS)}]" in out.output, command
+        bad = CliRunner().invoke(main, [command, "x.h5", "--estimator", "H3"])
+        assert bad.exit_code == 2 and all(name in bad.output for name in ESTIMATORS), command

@@ -21,6 +21,7 @@ from click.testing import CliRunner
 from guidefit import consistency as cons
 from guidefit.cli import main
 from guidefit.identify import IdentifySettings, identify
+from guidefit.labels import driving_row
 from guidefit.recording import RecordingData, RunData, write_recording
 from guidefit.simulate import SimulationConfig, simulate
 
@@ -80,7 +81,7 @@ def _accurate(result, truth):
 
 def _rigid_sets(shapes_by_run, seed=0):
     """ShapeSets of rigid motions at A-D (x, y) for unit tests of the fault search."""
-    from guidefit.identify import sensor_matrix
+    from guidefit.labels import sensor_matrix
     from guidefit.recording import Channel
 
     chans = [Channel(f"acc_{p}_{a}", "m/s^2", np.array(POINTS[p]), np.eye(3)[{"x": 0, "y": 1}[a]], 1.0)
@@ -91,7 +92,7 @@ def _rigid_sets(shapes_by_run, seed=0):
     for run, (direction, q) in shapes_by_run.items():
         out.append(cons.ShapeSet(run, tuple(c.name for c in chans), S, np.array([c.position_m for c in chans]),
                                  np.array([c.direction for c in chans]), q @ S.T * (1 + 0 * rng.random()),
-                                 cons.driving_row(direction, (0.01, 0.0, 0.02))))
+                                 driving_row(direction, (0.01, 0.0, 0.02))))
     return out
 
 
@@ -125,7 +126,7 @@ def test_twin_x_sensors_told_apart_by_the_driving_point():
 
     model = vib.solve_modes(vib.model_from_guide(load_guide("MRB35")))
     phi = np.asarray(model.shapes)[:5].T                                  # (5 modes, 5 DOFs), mass-normalised
-    b = cons.driving_row((-1.0, 0.0, 0.0), (0.035, -0.01, 0.015))
+    b = driving_row((-1.0, 0.0, 0.0), (0.035, -0.01, 0.015))
     sets = _rigid_sets({"lateral": ((-1.0, 0.0, 0.0), phi * (phi @ b)[:, None])})
     sets = [replace(s, driving=b) for s in sets]
     sets[0].shapes[:, 0] *= -1                                             # acc_A_x reversed
@@ -419,7 +420,7 @@ def test_plausibility_is_silent_for_rigid_sets_and_names_non_rigid_ones():
 
     model = vib.solve_modes(vib.model_from_guide(load_guide("MRB35")))
     phi = np.asarray(model.shapes)[:5].T
-    b = cons.driving_row((0.0, -1.0, 0.0), (0.01, 0.0, 0.02))
+    b = driving_row((0.0, -1.0, 0.0), (0.01, 0.0, 0.02))
     sets = _rigid_sets({"vertical": ((0.0, -1.0, 0.0), phi * (phi @ b)[:, None])})
     sets = [replace(s, driving=b, labels=tuple(model.labels), frequencies_hz=tuple(model.frequencies_hz))
             for s in sets]

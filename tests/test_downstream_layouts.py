@@ -126,7 +126,7 @@ def test_force_levels_on_a_one_axis_layout_name_model_modes_only(spread):
 
 def test_an_ambiguous_mode_gets_no_force_level(spread):
     """identify refits an ambiguous mode as a neighbour but writes no level for it."""
-    from guidefit.identify import _force_levels
+    from guidefit.identify_runs import _force_levels
     from guidefit.io import read_recording
 
     path, ident, settings = spread
@@ -135,7 +135,7 @@ def test_an_ambiguous_mode_gets_no_force_level(spread):
     target = next(m for m in rr.modes if m.label == "pitch")
     modes = [replace(m, label="ambiguous", candidates=(("pitch", 0.6), ("roll_low", 0.4))) if m is target else m
              for m in rr.modes]
-    levels = _force_levels(run, rr.frf, rr.hits, modes, settings, [])
+    levels, _ = _force_levels(run, rr.frf, rr.hits, modes, settings)
     labels = {lv["label"] for lv in levels}
     assert "ambiguous" not in labels and "vertical" in labels
 

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from guidefit.explain import ForceLevel, MeasuredMode, _level_shape_scatter, effective_force, explain_modes
-from guidefit.identify import _refit_in_band, _refit_one
+from guidefit.identify_runs import _refit_in_band, _refit_one
 from guidefit.modes import Mode, synthesize
 
 

@@ -225,7 +225,7 @@ def test_modal_stage_starts_from_frf_sets(recorded):
 
     path, truth, _ = recorded("corner")
     settings = IdentifySettings(jackknife=False)
-    collected = list(run_frfs(read_recording(path), settings, []))
+    collected = run_frfs(read_recording(path), settings).collected
     frf_by_run = {run.name: frf for run, frf, _ in collected}
     geometry = {run.name: modal_stage.geometry_of(run, frf) for run, frf, _ in collected}
     res = modal_stage.identify_frfs(frf_by_run, geometry, load_guide("MRB35"), settings)

@@ -65,7 +65,7 @@ def test_std_is_consistent_with_error(sample_result):
 def test_frfs_end_at_three_times_the_band_top(sample_result):
     """identify sums the spectra only to 3x the band's nominal top (1.3 x the highest model
     mode), not to the Nyquist frequency; the band and every check stay well inside."""
-    from guidefit.modal_stage import FRF_TOP_FACTOR
+    from guidefit.identify import FRF_TOP_FACTOR
 
     top = FRF_TOP_FACTOR * 1.3 * 5563.6  # MRB35's roll_high (Hz), see guidefit predict
     for run in sample_result.runs:
@@ -218,3 +218,57 @@ def test_plot_written(tmp_path):
                                        "--plot", str(out)])
     assert result.exit_code == 0, result.output
     assert out.stat().st_size > 20_000
+
+
+def test_per_run_method_is_gone_and_names_the_diagnostic():
+    with pytest.raises(ValueError, match="per_run_fits") as info:
+        IdentifySettings(method="per_run")
+    assert "\n" not in str(info.value)
+    with pytest.raises(ValueError, match="'global'"):
+        IdentifySettings(method="both")
+
+
+def test_per_run_diagnostic_fits_each_run_on_its_own(sample_result):
+    """per_run_fits: the per-run curve fits of the same FRFs find the joint modes of the global fit."""
+    from guidefit.identify import per_run_fits
+
+    fits = per_run_fits(SAMPLES / "mrb35_sample.h5", settings=IdentifySettings(jackknife=False))
+    got = {m.label: m for m in fits.modes}
+    for m in sample_result.modes:
+        if m.label in ("vertical", "roll_low"):
+            assert got[m.label].frequency_hz == pytest.approx(m.frequency_hz, rel=2e-3), m.label
+            assert got[m.label].to_dict()["method"] == "curve_fit"
+    assert isinstance(fits.warnings, tuple)
+
+
+def test_a_run_without_a_channel_gives_the_other_channels_frfs():
+    """RunChannels (how a sensor-fault correction re-enters the FRF stage): with fixed windows, the
+    FRFs of a run read without one channel are those of the whole run without its column."""
+    from guidefit.frf import WindowSettings
+    from guidefit.identify import RunChannels, _compute_frf
+    from guidefit.recording import read_recording
+
+    run = read_recording(SAMPLES / "mrb35_sample.h5").runs[0]
+    settings = IdentifySettings(window=WindowSettings(none=True))
+    whole = _compute_frf(RunChannels.without(run, ()), RunChannels.without(run, ()).hits(settings), settings, 8e3)
+    drop = whole.channels[1]
+    view = RunChannels.without(run, {drop})
+    part = _compute_frf(view, view.hits(settings), settings, 8e3)
+    assert drop not in part.channels and len(part.channels) == len(whole.channels) - 1
+    cols = [whole.channels.index(c) for c in part.channels]
+    np.testing.assert_array_equal(part.H, whole.H[:, cols])
+    np.testing.assert_array_equal(part.coherence, whole.coherence[:, cols])
+
+
+def test_stage_warnings_are_the_results_warnings(sample_result):
+    """The pipeline's stages carry their warnings: the FRF stage's come first in the result's."""
+    from guidefit.identify import frf_stage, frf_top_hz, guide_and_model
+    from guidefit.recording import read_recording
+
+    rec = read_recording(SAMPLES / "mrb35_sample.h5")
+    settings = IdentifySettings(min_accepted_hits=10_000)  # every run warns: too few accepted hits
+    stage = frf_stage(rec, settings, frf_top_hz(guide_and_model(rec)[1], settings))
+    assert len(stage.collected) == len(rec.runs) and isinstance(stage.warnings, tuple)
+    assert [w for w in stage.warnings if "accepted hit(s)" in w] == [
+        f"run '{r.name}': only {sum(h['accepted'] for h in rows)} accepted hit(s); uncertainties are unreliable"
+        for r, _, rows in stage.collected]

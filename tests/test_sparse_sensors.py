@@ -34,7 +34,7 @@ def nominal():
 
 
 def _sensors(points, axes):
-    from guidefit.identify import sensor_matrix
+    from guidefit.labels import sensor_matrix
 
     chans = [Channel(f"acc_{p}_{a}", "m/s^2", np.array(POINTS[p]), np.eye(3)["xyz".index(a)], 1.0)
              for p in points for a in axes]

@@ -237,8 +237,8 @@ def test_another_structure_without_a_hit_point_is_rejected_not_passed(tmp_path):
 
 
 def test_unknown_hit_point_expects_every_mode_the_sensors_see():
-    from guidefit.consistency import ShapeSet, driving_row, observable_modes
-    from guidefit.labels import sensor_matrix
+    from guidefit.consistency import ShapeSet, observable_modes
+    from guidefit.labels import driving_row, sensor_matrix
     from guidefit.model import vibration as vib
     from guidefit.model.guides import load_guide
     from guidefit.recording import Channel
