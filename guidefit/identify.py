@@ -169,6 +169,8 @@ class Identification:
     #: why a joint parameter the set-up should have given is missing (its mode excited and seen, yet not found
     #: or not told apart): the identification is incomplete (exit 1), the parameters found are still given
     unidentified: tuple = ()
+    #: the Recording identify read (None from FRFs): explain iterates its hits again without reading the file
+    recording: object = field(default=None, repr=False, compare=False)
 
     def hit_rows(self) -> list[dict]:
         """Every hit of every run, accepted or rejected, including runs that gave no FRF."""
@@ -383,7 +385,7 @@ def identify(path, guide=None, settings: IdentifySettings | None = None) -> Iden
         params = joint_parameters(guide.mass_kg, {})
     return Identification(str(path), guide, tuple(runs), tuple(modes), params, tuple(warnings),
                           tuple(extras), tuple(missing), tuple(failed_rows), hits_checked=not from_frfs,
-                          gate=gate, sensor_faults=sensors.faults)
+                          gate=gate, sensor_faults=sensors.faults, recording=None if from_frfs else recording)
 
 
 def _identify_global(path, source, guide, model, settings) -> Identification:
@@ -464,7 +466,8 @@ def _identify_global(path, source, guide, model, settings) -> Identification:
     unidentified = () if gate is not None else _unidentified(joint, model, check.sets, [*modes, *res.extras])
     return Identification(str(path), guide, tuple(runs), tuple(modes), params, tuple(warnings),
                           tuple(res.extras), tuple(res.missing), tuple(failed_rows), hits_checked=not from_frfs,
-                          modal=res, gate=gate, sensor_faults=check.faults, unidentified=unidentified)
+                          modal=res, gate=gate, sensor_faults=check.faults, unidentified=unidentified,
+                          recording=None if from_frfs else recording)
 
 
 def _unidentified(joint: dict, model, sets, modes) -> tuple:  # modes: the named ones and the extras

@@ -79,7 +79,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from guidefit.errors import IdentificationError, ModelError
+from guidefit.errors import IdentificationError, ModelError, RecordingError
 
 #: Runs (or hit-force bins) form levels when their forces differ by at least this factor.
 FORCE_RATIO = 1.5
@@ -366,9 +366,9 @@ class ForwardModel:
     """
 
     def __init__(self, guide, levels, n_hits: int = SIM_HITS, damping: dict | None = None, effects=()):
-        from guidefit.simulate import _as_guide
+        from guidefit.model.guides import as_guide
 
-        self.guide = _as_guide(guide)
+        self.guide = as_guide(guide)
         self.levels = list(levels)
         self.n_hits = int(n_hits)
         self.effects = tuple(effects)
@@ -500,10 +500,10 @@ def measure_levels(identification, labels=("vertical",), force_bins: int = 3, no
     of :class:`MeasuredLevel` (grouped by test, then label, forces
     increasing); problems go to ``notes``.
     """
-    from guidefit.recording import read_recording
-
     notes = [] if notes is None else notes
-    recording = read_recording(identification.file)
+    recording = identification.recording  # the recording identify read (its hits are iterated again, not the file)
+    if recording is None:
+        raise RecordingError(f"{identification.file}: FRFs, no time data: force levels need the hits")
     groups: dict = {}
     for rr in identification.runs:
         run = recording.run(rr.name)
@@ -788,7 +788,7 @@ def prepare_for_explain(identification, modes, levels, notes: list):
     never an extra mode.
     Returns ``(modes, levels)``.
     """
-    from guidefit.explain.inputs import ForceLevel
+    from guidefit.model.measured import ForceLevel
 
     if len(identification.runs) < 2:
         return modes, list(levels)
@@ -822,12 +822,12 @@ def prepare_for_explain(identification, modes, levels, notes: list):
 
 def _lowest_run_modes(identification, lowest: set, kept: list, labels: set) -> list:
     """The lowest runs' own labelled modes of the labels that identify had taken from a harder run."""
-    from guidefit.explain.modes_json import modes_from_result
+    from guidefit.model.measured import measured_mode
 
     have = {(m.run, m.label) for m in kept}
-    entries = [im.to_dict() for rr in identification.runs if rr.name in lowest for im in rr.modes
-               if im.label in labels and im.label != "extra" and (rr.name, im.label) not in have]
-    return modes_from_result({"modes": entries}, str(identification.file))[0] if entries else []
+    found = [im for rr in identification.runs if rr.name in lowest for im in rr.modes
+             if im.label in labels and im.label != "extra" and (rr.name, im.label) not in have]
+    return [measured_mode(im, f"{identification.file}: modes entry {k}") for k, im in enumerate(found)]
 
 
 #: Levels whose de-meaned frequencies have a chi-square p-value below this change with force.

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import json
 from dataclasses import replace
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -150,8 +149,12 @@ def test_levels_of_ambiguous_or_extra_modes_are_left_out_not_refused(spread):
     assert len(levels) == len(data["force_levels"]) - 2
     with pytest.raises(Exception, match="must be one of"):  # a label that is no label at all is still an error
         modes_from_result({**data, "force_levels": [{**data["force_levels"][0], "label": "pitchh"}]}, "test")
-    wrapped = SimpleNamespace(to_dict=lambda: data, file=ident.file, guide=ident.guide, modes=ident.modes,
-                              runs=ident.runs)
+    # the same levels in the Identification's objects (explain reads those, not its JSON)
+    first = next(r for r in ident.runs if r.force_levels)
+    named = first.force_levels[0]
+    unnamed = [{**named, "label": "ambiguous"}, {**named, "label": "extra"}]
+    wrapped = replace(ident, runs=tuple(replace(r, force_levels=[*r.force_levels, *unnamed]) if r is first else r
+                                        for r in ident.runs))
     result = explain(wrapped, candidates=["contact_stiffness"])
     assert result.verdict == "adequate"
     assert not [n for n in result.notes if "must be one of" in n]

@@ -119,7 +119,7 @@ from __future__ import annotations
 
 from guidefit.explain.data import level_shape_scatter as _level_shape_scatter  # noqa: F401 - tests
 from guidefit.explain.entry import explain, explain_identification, fitted_spec, identify_for_explain
-from guidefit.explain.inputs import Explanation, ForceLevel, MeasuredMode, Sensor
+from guidefit.explain.inputs import Explanation
 from guidefit.explain.modes_json import modes_from_result, read_modes_json
 from guidefit.explain.pipeline import explain_modes
 from guidefit.explain.plot import plot_explanation
@@ -145,6 +145,7 @@ from guidefit.model.effects.amplitude_dependence import (
     DEFAULT_DECAY_DAMPING,
     effective_force,
 )
+from guidefit.model.measured import ForceLevel, MeasuredMode, Sensor
 
 __all__ = [
     "ACCEPT_P_VALUE", "AMPLITUDE_MODEL_FORM", "AMPLITUDE_SHIFT_CAP", "CARRIAGE_LABELS", "DEFAULT_DECAY_DAMPING",

@@ -16,7 +16,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from guidefit.errors import RecordingError
-from guidefit.explain.inputs import ForceLevel, MeasuredMode
 from guidefit.explain.settings import (
     ACCEPT_P_VALUE,
     CARRIAGE_LABELS,
@@ -33,6 +32,7 @@ from guidefit.explain.settings import (
 )
 from guidefit.model.effects import LevelData
 from guidefit.model.effects.amplitude_dependence import effective_force
+from guidefit.model.measured import ForceLevel, MeasuredMode
 
 
 @dataclass(frozen=True)
@@ -137,7 +137,7 @@ def finite_positive(x) -> bool:
 
 def default_sensor_map(guide, channels) -> dict:
     """Sensors for channel names acc_<point>_<axis> from the guide's measuring points."""
-    from guidefit.explain.inputs import Sensor
+    from guidefit.model.measured import Sensor
 
     axes = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
     out = {}

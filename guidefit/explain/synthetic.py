@@ -6,8 +6,8 @@ import math
 
 import numpy as np
 
-from guidefit.explain.inputs import ForceLevel, MeasuredMode, Sensor
 from guidefit.explain.settings import DEFAULT_HITS, DEFAULT_PULSE_S
+from guidefit.model.measured import ForceLevel, MeasuredMode, Sensor
 
 
 def default_sensors(guide, axes: str = "xy") -> list:
