@@ -43,7 +43,6 @@ import numpy as np
 
 from guidefit.errors import IdentificationError, identification_failure
 from guidefit.identify_runs import (  # noqa: F401 - the per-run stage (issue 22), importable from here
-    JOINT_LABELS,
     MIN_BINS_IN_BAND,
     _excitation_warnings,
     _fit_run,
@@ -56,8 +55,8 @@ from guidefit.identify_runs import (  # noqa: F401 - the per-run stage (issue 22
     _with_jackknife,
     frf_channels,
 )
+from guidefit.model.vibration import JOINT_LABELS
 from guidefit.modeshapes import (  # noqa: F401 - also re-exported: guidefit.identify.IdentifiedMode etc.
-    UNNAMED_LABELS,
     IdentifiedMode,
     _coherence_at,
     _half_power_entry,

@@ -19,8 +19,8 @@ from dataclasses import replace
 import numpy as np
 
 from guidefit.errors import IdentificationError
+from guidefit.model.vibration import JOINT_LABELS, UNNAMED_LABELS
 from guidefit.modeshapes import (
-    UNNAMED_LABELS,
     IdentifiedMode,
     _coherence_at,
     _half_power_entry,
@@ -29,8 +29,6 @@ from guidefit.modeshapes import (
     rigid_body_motion,
     sensor_matrix,
 )
-
-JOINT_LABELS = {"V": "vertical", "H": "roll_low"}
 
 
 def _search_band(model, run, settings) -> tuple[float, float]:

@@ -22,10 +22,6 @@ import numpy as np
 
 from guidefit.errors import IdentificationError
 
-#: labels of identified modes that name no model mode: a peak the model does not predict (``extra``) and a
-#: mode the layout cannot tell between two or more model modes (``ambiguous``, with ``candidates``)
-UNNAMED_LABELS = ("extra", "ambiguous")
-
 
 @dataclass(frozen=True)
 class IdentifiedMode:

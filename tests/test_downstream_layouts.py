@@ -23,8 +23,8 @@ import pytest
 from click.testing import CliRunner
 
 from guidefit.cli import main
-from guidefit.explain.settings import CARRIAGE_LABELS
 from guidefit.io import write_recording
+from guidefit.model.vibration import MODE_LABELS
 from guidefit.simulate import SimulationConfig, simulate
 
 CANDIDATES = "added_mass,contact_stiffness"
@@ -119,7 +119,7 @@ def test_force_levels_on_a_one_axis_layout_name_model_modes_only(spread):
     _, ident, _ = spread
     levels = ident.to_dict()["force_levels"]
     assert levels, "a 50-600 N spread over 6 hits gives force levels"
-    assert {lv["label"] for lv in levels} <= set(CARRIAGE_LABELS)
+    assert {lv["label"] for lv in levels} <= set(MODE_LABELS)
     assert {lv["run"] for lv in levels} == {"vertical", "lateral"}
 
 

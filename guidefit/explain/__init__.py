@@ -125,7 +125,6 @@ from guidefit.explain.pipeline import explain_modes
 from guidefit.explain.plot import plot_explanation
 from guidefit.explain.settings import (
     ACCEPT_P_VALUE,
-    CARRIAGE_LABELS,
     DEFAULT_FREQUENCY_STD,
     DEFAULT_HITS,
     DEFAULT_PULSE_S,
@@ -148,7 +147,7 @@ from guidefit.model.effects.amplitude_dependence import (
 from guidefit.model.measured import ForceLevel, MeasuredMode, Sensor
 
 __all__ = [
-    "ACCEPT_P_VALUE", "AMPLITUDE_MODEL_FORM", "AMPLITUDE_SHIFT_CAP", "CARRIAGE_LABELS", "DEFAULT_DECAY_DAMPING",
+    "ACCEPT_P_VALUE", "AMPLITUDE_MODEL_FORM", "AMPLITUDE_SHIFT_CAP", "DEFAULT_DECAY_DAMPING",
     "DEFAULT_FREQUENCY_STD", "DEFAULT_HITS", "DEFAULT_PULSE_S", "DEFAULT_SHAPE_STD", "EQUAL_BIC",
     "ESTIMATED_SHAPE_STD_FLOOR", "FORCE_LEVEL_FLOOR", "FREQUENCY_FLOOR", "IDENTIFIABLE_LOG_STD", "SHAPE_STD_FLOOR",
     "UNPAIRED_PENALTY", "Explanation", "ForceLevel", "MeasuredMode", "Sensor", "default_sensors",

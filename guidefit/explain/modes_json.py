@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from guidefit.errors import RecordingError
-from guidefit.explain.settings import CARRIAGE_LABELS, canonical_label
+from guidefit.explain.settings import canonical_label
 from guidefit.model.measured import (
     ForceLevel,
     MeasuredMode,
@@ -15,7 +15,7 @@ from guidefit.model.measured import (
     checked_vector3,
     measured_mode,
 )
-from guidefit.modeshapes import UNNAMED_LABELS
+from guidefit.model.vibration import MODE_LABELS, UNNAMED_LABELS
 
 
 def _std_of(entry: dict, what: str):
@@ -63,7 +63,7 @@ def level_from(entry, what: str) -> ForceLevel:
         if key not in entry:
             raise RecordingError(f"{what}: '{key}' missing")
     if canonical_label(entry["label"]) is None:
-        raise RecordingError(f"{what}: 'label' must be one of {', '.join(CARRIAGE_LABELS)}, got {entry['label']!r}")
+        raise RecordingError(f"{what}: 'label' must be one of {', '.join(MODE_LABELS)}, got {entry['label']!r}")
     pos, direction = entry.get("hit_position_m"), entry.get("hit_direction")
     forces, band = entry.get("hit_forces_n"), entry.get("band_hz")
     if forces is not None and (not isinstance(forces, list) or not forces):
