@@ -1,4 +1,5 @@
-"""Read identified modes: ``identify --json`` output or a hand-written list (:func:`read_modes_json`)."""
+"""The measured modes explain starts from: an Identification's objects (:func:`modes_from_identification`), or
+``identify --json`` output or a hand-written list (:func:`read_modes_json`, :func:`modes_from_result`)."""
 
 from __future__ import annotations
 
