@@ -36,10 +36,10 @@ import re
 from dataclasses import dataclass, field
 
 from guidefit.errors import GuideError
+from guidefit.model.vibration import JOINT_LABELS
 
 _QUALITY = {"min_coherence": float, "max_rejected_hits": int, "max_relative_std": float, "allow_warnings": bool}
 _PARAMETERS = ("f_V", "zeta_V", "K_V", "c_V", "f_H", "zeta_H", "K_H", "c_H")  # identify's parameters
-_JOINT = ("vertical", "roll_low")
 
 
 class CheckSpecError(GuideError):
@@ -131,9 +131,9 @@ def check_result(result: dict, spec: CheckSpec) -> list[str]:
     if "min_coherence" in q:
         for mode in result.get("modes", []):
             coh = mode.get("coherence")
-            if mode.get("label") in _JOINT and (coh is None or coh != coh):  # an FRF file without coherence
+            if mode.get("label") in JOINT_LABELS.values() and (coh is None or coh != coh):  # an FRF file without coherence
                 out.append(f"{where}: no coherence at the {mode['label']} peak to check against {q['min_coherence']}")
-            elif mode.get("label") in _JOINT and coh < q["min_coherence"]:
+            elif mode.get("label") in JOINT_LABELS.values() and coh < q["min_coherence"]:
                 out.append(f"{where}: coherence {coh:.3f} at the {mode['label']} peak below {q['min_coherence']}")
     if "max_rejected_hits" in q and result.get("hits_checked") is False:
         out.append(f"{where}: max_rejected_hits not checkable: no hit checks were possible (FRF input)")

@@ -57,14 +57,14 @@ import numpy as np
 
 from guidefit.errors import IdentificationError, identification_failure
 from guidefit.identify_runs import (
-    JOINT_LABELS,
     _excitation_warnings,
     _force_levels,
     _hit_row,
     _quality_warnings,
     frf_channels,
 )
-from guidefit.modeshapes import UNNAMED_LABELS, IdentifiedMode  # noqa: F401 - guidefit.identify.IdentifiedMode
+from guidefit.model.vibration import JOINT_LABELS, UNNAMED_LABELS  # noqa: F401 - guidefit.identify.UNNAMED_LABELS
+from guidefit.modeshapes import IdentifiedMode  # noqa: F401 - guidefit.identify.IdentifiedMode
 
 # --------------------------------------------------------------------------- Eq. (24)-(29)
 
@@ -171,6 +171,8 @@ class Identification:
     #: why a joint parameter the set-up should have given is missing (its mode excited and seen, yet not found
     #: or not told apart): the identification is incomplete (exit 1), the parameters found are still given
     unidentified: tuple = ()
+    #: the Recording identify read (None from FRFs): explain iterates its hits again without reading the file
+    recording: object = field(default=None, repr=False, compare=False)
 
     def hit_rows(self) -> list[dict]:
         """Every hit of every run, accepted or rejected, including runs that gave no FRF."""
@@ -685,7 +687,8 @@ def conclude(path, recording, guide, model, settings: IdentifySettings, fit: Mod
     unidentified = () if gate is not None else _unidentified(joint, model, sets, [*modes, *res.extras])
     return Identification(str(path), guide, tuple(runs), tuple(modes), params, tuple(warnings),
                           tuple(res.extras), tuple(res.missing), tuple(failed_rows), hits_checked=hits_checked,
-                          modal=res, gate=gate, sensor_faults=fit.check.faults, unidentified=unidentified)
+                          modal=res, gate=gate, sensor_faults=fit.check.faults, unidentified=unidentified,
+                          recording=recording if hits_checked else None)
 
 
 def _unidentified(joint: dict, model, sets, modes) -> tuple:  # modes: the named ones and the extras

@@ -25,8 +25,8 @@ import numpy as np
 
 from guidefit.errors import IdentificationError
 from guidefit.labels import sensor_matrix
+from guidefit.model.vibration import JOINT_LABELS, UNNAMED_LABELS
 from guidefit.modeshapes import (
-    UNNAMED_LABELS,
     IdentifiedMode,
     _coherence_at,
     _half_power_entry,
@@ -34,8 +34,7 @@ from guidefit.modeshapes import (
     real_shape,
     rigid_body_motion,
 )
-
-JOINT_LABELS = {"V": "vertical", "H": "roll_low"}
+from guidefit.windows import undo_window_damping
 
 
 @dataclass(frozen=True)
@@ -275,7 +274,6 @@ def _fit_run(run, frf, guide, model, settings) -> tuple[list[IdentifiedMode], li
     """One run's modes by per-run curve fits in the search band, labelled from that run alone, and the
     warnings of the fit (band, resolution, :class:`guidefit.modes.ModeFitWarning`)."""
     from guidefit import curvefit
-    from guidefit import frf as frf_mod
     from guidefit import modes as modes_mod
     from guidefit.model import vibration as vib
 
@@ -307,12 +305,9 @@ def _fit_run(run, frf, guide, model, settings) -> tuple[list[IdentifiedMode], li
     fitted = sorted(fitted, key=lambda m: m.frequency_hz)
     sensors = sensor_matrix(frf_channels(run, frf))
     mass = vib.carriage_mass_matrix(vib.model_from_guide(guide))
-    tau = getattr(frf, "exp_window_tau_s", None)
     candidates = []
     for mode in fitted:
-        f_n, zeta = mode.frequency_hz, mode.damping_ratio
-        if tau:
-            f_n, zeta = frf_mod.exponential_window_damping_correction(zeta, f_n, tau)
+        f_n, zeta = undo_window_damping(mode.frequency_hz, mode.damping_ratio, frf)
         shape = real_shape(mode.modal_constants)
         q, _observed = rigid_body_motion(shape, sensors)
         norm = np.linalg.norm(q) or 1.0
@@ -345,7 +340,7 @@ def _fit_run(run, frf, guide, model, settings) -> tuple[list[IdentifiedMode], li
             shape=dict(zip(names, (float(v) for v in c["shape"]))),
             motion=tuple(float(v) for v in c["q"]), energy={k: float(v) for k, v in c["energy"].items()},
             coherence=_coherence_at(frf, mode.peak_frequency_hz, mode.residues),
-            half_power=_half_power_entry(frf, mode, tau), raw_damping_ratio=float(mode.damping_ratio),
+            half_power=_half_power_entry(frf, mode), raw_damping_ratio=float(mode.damping_ratio),
             fit=mode, label_basis=dec.basis, label_note=dec.note, label_mac=dec.mac, label_scale=dec.scale,
         ))
     return out, warnings
@@ -387,6 +382,8 @@ def _force_levels(run, frf, rows, modes, settings) -> tuple[list[dict], list[str
     forces = np.array([r["peak_force_n"] for r in accepted])
     if forces.max() < settings.min_force_ratio * forces.min():
         return [], []
+    # not windows.window_settings_of(frf) (yet): without an exponential window the bins get no force window either,
+    # unlike the run's FRF; the one rebuild moves these levels' frequencies by up to ~2 std (a behaviour change)
     window = frf_mod.WindowSettings(force_window_s=frf.force_window_s, exp_tau_s=frf.exp_window_tau_s) \
         if frf.exp_window_tau_s else frf_mod.WindowSettings(none=True)
     names = [ch.name for ch in frf_channels(run, frf)]
@@ -421,10 +418,7 @@ def _force_levels(run, frf, rows, modes, settings) -> tuple[list[dict], list[str
             if r is None:  # the mode is not reproduced by this bin's hits: a level without a frequency
                 level["refit_failed"] = True
             else:
-                f_n, z_n = r.frequency_hz, r.damping_ratio
-                if frf.exp_window_tau_s:
-                    f_n, z_n = frf_mod.exponential_window_damping_correction(r.damping_ratio, r.frequency_hz,
-                                                                           frf.exp_window_tau_s)
+                f_n, z_n = undo_window_damping(r.frequency_hz, r.damping_ratio, frf)
                 level["frequency_hz"], level["frequency_std_hz"] = float(f_n), r.frequency_std_hz
                 level["damping_ratio"], level["damping_std"] = float(z_n), r.damping_std
                 level["shape"] = dict(zip(names, (float(v) for v in real_shape(r.modal_constants))))

@@ -524,7 +524,7 @@ def _labelled(gf, candidates, per_run, frf_by_run, geometry, model, band, mass_k
             shape=dict(zip(names, (float(v) for v in c["constants"][run]))),
             motion=tuple(float(v) for v in c["q"]), energy={kk: float(v) for kk, v in c["energy"].items()},
             coherence=ident._coherence_at(frf, view.peak_frequency_hz, view.residues),
-            half_power=ident._half_power_entry(frf, view, frf.exp_window_tau_s),
+            half_power=ident._half_power_entry(frf, view),
             raw_damping_ratio=_windowed_damping(m, frf), fit=view,
             estimates=tuple(estimates), candidates=tuple(amb or ()),
             shapes={r: dict(zip([ch.name for ch in geometry[r].channels], (float(v) for v in c["constants"][r])))

@@ -22,10 +22,6 @@ import numpy as np
 
 from guidefit.errors import IdentificationError
 
-#: labels of identified modes that name no model mode: a peak the model does not predict (``extra``) and a
-#: mode the layout cannot tell between two or more model modes (``ambiguous``, with ``candidates``)
-UNNAMED_LABELS = ("extra", "ambiguous")
-
 
 @dataclass(frozen=True)
 class IdentifiedMode:
@@ -126,12 +122,12 @@ def _coherence_at(frf, frequency_hz: float, weights) -> float:
     return float(np.sum(frf.coherence[i] * w) / np.sum(w))
 
 
-def _half_power_entry(frf, mode, tau_s) -> dict | None:
-    """Eq. (26)/(28) on the channel that shows the mode most, with the window correction."""
+def _half_power_entry(frf, mode) -> dict | None:
+    """Eq. (26)/(28) on the channel that shows the mode most, with the correction of the FrfSet's window."""
     import warnings as _w
 
-    from guidefit import frf as frf_mod
     from guidefit import halfpower
+    from guidefit.windows import undo_window_damping
 
     channel = int(np.argmax(np.abs(mode.residues)))
     peak = int(np.argmin(np.abs(frf.frequency_hz - mode.peak_frequency_hz)))
@@ -143,9 +139,7 @@ def _half_power_entry(frf, mode, tau_s) -> dict | None:
         return None
     # Eq. (26)/(28) as printed divide by the |H| peak; the exact SDOF accelerance relation gives f_n
     sdof = halfpower.sdof_from_half_power(hp.f1_hz, hp.f2_hz)
-    f_n, zeta = sdof.f_n_hz, sdof.zeta
-    if tau_s:
-        f_n, zeta = frf_mod.exponential_window_damping_correction(sdof.zeta, sdof.f_n_hz, tau_s)
+    f_n, zeta = undo_window_damping(sdof.f_n_hz, sdof.zeta, frf)
     return {"f_peak_hz": hp.f_peak_hz, "f1_hz": hp.f1_hz, "f2_hz": hp.f2_hz, "zeta": hp.zeta,
             "f_n_hz": f_n, "zeta_window_corrected": zeta, "channel": frf.channels[channel],
             "bins_in_band": int(round((hp.f2_hz - hp.f1_hz) / (frf.frequency_hz[1] - frf.frequency_hz[0])))}

@@ -79,7 +79,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from guidefit.errors import IdentificationError, ModelError
+from guidefit.errors import IdentificationError, ModelError, RecordingError
 
 #: Runs (or hit-force bins) form levels when their forces differ by at least this factor.
 FORCE_RATIO = 1.5
@@ -127,8 +127,7 @@ class LevelSetup:
     hit_position_m: tuple
     hit_direction: tuple
     pulse_s: float
-    force_window_s: float | None
-    exp_tau_s: float | None
+    window: object  # guidefit.frf.WindowSettings of the level's FRF (guidefit.windows.window_settings_of)
     estimator: str = "H1"
 
 
@@ -163,24 +162,15 @@ class MeasuredLevel:
 # --------------------------------------------------------------------------- the estimator
 
 
-def _window_correction(fit: ModeFit, exp_tau_s: float | None) -> ModeFit:
-    from guidefit import frf as frf_mod
-
-    if not exp_tau_s or not math.isfinite(exp_tau_s):
-        return fit
-    f, z = frf_mod.exponential_window_damping_correction(fit.damping_ratio, fit.frequency_hz, exp_tau_s)
-    return ModeFit(float(f), fit.frequency_std_hz, float(z))
-
-
-def apparent_mode(frequency_hz, H, band_hz, exp_tau_s: float | None = None, initial=None) -> ModeFit:
+def apparent_mode(frequency_hz, H, band_hz, initial=None) -> ModeFit:
     """One pole fitted to every channel of an FRF in ``band_hz``: the level's apparent mode.
 
     :func:`guidefit.modes.fit_modes` with one mode (channels scaled alike,
     residual terms for the modes outside the band, the bins' weights rising
-    linearly over :data:`EDGE_BINS` bins at the band's ends); with ``exp_tau_s`` the
-    exponential window's damping is removed
-    (:func:`guidefit.frf.exponential_window_damping_correction`), as identify
-    does. ``initial``: (frequency_hz, zeta) to start the fit from (default
+    linearly over :data:`EDGE_BINS` bins at the band's ends); the pole of
+    the FRF as given (:func:`level_estimate` removes the FrfSet's exponential
+    window's damping, :func:`guidefit.windows.undo_window_damping`, as identify
+    does). ``initial``: (frequency_hz, zeta) to start the fit from (default
     the band's peaks). The same function estimates the measured and the
     simulated levels.
 
@@ -206,8 +196,7 @@ def apparent_mode(frequency_hz, H, band_hz, exp_tau_s: float | None = None, init
                                        initial=None if initial is None else [initial])[0]
     except (ValueError, np.linalg.LinAlgError) as exc:
         raise IdentificationError(f"no mode in {band_hz[0]:.0f}-{band_hz[1]:.0f} Hz ({exc})") from None
-    fit = ModeFit(float(mode.frequency_hz), mode.frequency_std_hz, float(mode.damping_ratio))
-    return _window_correction(fit, exp_tau_s)
+    return ModeFit(float(mode.frequency_hz), mode.frequency_std_hz, float(mode.damping_ratio))
 
 
 def peak_centroid(frequency_hz, H, mode_hz: float, weights=None) -> float:
@@ -272,9 +261,11 @@ def level_estimate(frf, mode_hz: float, damping_ratio: float, weights=None, jack
     f_c = peak_centroid(frf.frequency_hz, frf.H, mode_hz, weights)
     half = max(BAND_ZETAS * damping_ratio, BAND_MIN) * f_c
     band = (f_c - half, f_c + half)
+    from guidefit.windows import undo_window_damping
+
     try:
-        pole = apparent_mode(frf.frequency_hz, frf.H, band, frf.exp_window_tau_s, initial=(f_c, damping_ratio))
-        zeta, std = pole.damping_ratio, pole.frequency_std_hz
+        pole = apparent_mode(frf.frequency_hz, frf.H, band, initial=(f_c, damping_ratio))
+        zeta, std = float(undo_window_damping(pole.frequency_hz, pole.damping_ratio, frf)[1]), pole.frequency_std_hz
     except IdentificationError:
         zeta, std = math.nan, None
     if jackknife and frf.n_groups >= 2:
@@ -333,12 +324,11 @@ def predict_level(model, level: MeasuredLevel, n_hits: int = SIM_HITS) -> ModeFi
     """The apparent mode of a level predicted by ``model``: its simulated hits through the measurement's
     windows and estimator and :func:`level_estimate` (the peak searched from the model's small-amplitude
     frequency, the measured reference damping and channel weights)."""
-    from guidefit.frf import WindowSettings, frf_from_records
+    from guidefit.frf import frf_from_records
 
     s = level.setup
     records, fs, pre = simulate_level(model, level, n_hits)
-    window = WindowSettings(force_window_s=s.force_window_s or math.inf, exp_tau_s=s.exp_tau_s or math.inf)
-    frf = frf_from_records(records, fs, 0, ("force", *s.channel_names), s.estimator, window,
+    frf = frf_from_records(records, fs, 0, ("force", *s.channel_names), s.estimator, s.window,
                            pretrigger_samples=pre, run=level.run, workers=1)
     sol = model.solution
     f_small = float(sol.frequencies_hz[sol.labels.index(level.label)]) if level.label in sol.labels \
@@ -366,9 +356,9 @@ class ForwardModel:
     """
 
     def __init__(self, guide, levels, n_hits: int = SIM_HITS, damping: dict | None = None, effects=()):
-        from guidefit.simulate import _as_guide
+        from guidefit.model.guides import as_guide
 
-        self.guide = _as_guide(guide)
+        self.guide = as_guide(guide)
         self.levels = list(levels)
         self.n_hits = int(n_hits)
         self.effects = tuple(effects)
@@ -464,6 +454,7 @@ def _bin_frf(run, rr, wanted: set, whole: bool):
     the bin's pulse duration and (record length, pretrigger) in samples."""
     from guidefit import frf as frf_mod
     from guidefit.hits import HitSettings, iter_hits
+    from guidefit.windows import window_settings_of
 
     frf = rr.frf
     pulses, hits, shape = [], [], (0, 0)
@@ -476,9 +467,7 @@ def _bin_frf(run, rr, wanted: set, whole: bool):
     if not pulses:
         raise IdentificationError(f"run '{run.name}': no accepted hit in the force bin")
     if not whole:
-        window = frf_mod.WindowSettings(force_window_s=frf.force_window_s or math.inf,
-                                        exp_tau_s=frf.exp_window_tau_s or math.inf)
-        frf = frf_mod.compute_frf(run, hits, estimator=frf.estimator, window=window, workers=1,
+        frf = frf_mod.compute_frf(run, hits, estimator=frf.estimator, window=window_settings_of(frf), workers=1,
                                   max_frequency_hz=frf_mod.top_of(frf))
     return frf, float(np.median(pulses)), shape
 
@@ -500,10 +489,10 @@ def measure_levels(identification, labels=("vertical",), force_bins: int = 3, no
     of :class:`MeasuredLevel` (grouped by test, then label, forces
     increasing); problems go to ``notes``.
     """
-    from guidefit.recording import read_recording
-
     notes = [] if notes is None else notes
-    recording = read_recording(identification.file)
+    recording = identification.recording  # the recording identify read (its hits are iterated again, not the file)
+    if recording is None:
+        raise RecordingError(f"{identification.file}: FRFs, no time data: force levels need the hits")
     groups: dict = {}
     for rr in identification.runs:
         run = recording.run(rr.name)
@@ -529,6 +518,8 @@ def measure_levels(identification, labels=("vertical",), force_bins: int = 3, no
 
 
 def _measure_mode(bins, mode, notes: list) -> list:
+    from guidefit.windows import window_settings_of
+
     names = [ch.name for ch in bins[0][1].channels]
     weights = np.array([abs(mode.shape.get(n, 0.0)) for n in names]) ** 2
     out = []
@@ -552,7 +543,7 @@ def _measure_mode(bins, mode, notes: list) -> list:
             directions=np.array([ch.direction for ch in channels], float),
             hit_position_m=tuple(float(x) for x in hit),
             hit_direction=tuple(float(x) for x in run.excitation_direction), pulse_s=pulse,
-            force_window_s=frf.force_window_s, exp_tau_s=frf.exp_window_tau_s, estimator=frf.estimator)
+            window=window_settings_of(frf), estimator=frf.estimator)
         out.append(MeasuredLevel(run.name, mode.label, tuple(float(x) for x in np.sort(forces)),
                                  fit.frequency_hz, fit.frequency_std_hz, fit.damping_ratio,
                                  tuple(float(x) for x in band), setup, float(mode.frequency_hz),
@@ -788,7 +779,7 @@ def prepare_for_explain(identification, modes, levels, notes: list):
     never an extra mode.
     Returns ``(modes, levels)``.
     """
-    from guidefit.explain.inputs import ForceLevel
+    from guidefit.model.measured import ForceLevel
 
     if len(identification.runs) < 2:
         return modes, list(levels)
@@ -822,12 +813,12 @@ def prepare_for_explain(identification, modes, levels, notes: list):
 
 def _lowest_run_modes(identification, lowest: set, kept: list, labels: set) -> list:
     """The lowest runs' own labelled modes of the labels that identify had taken from a harder run."""
-    from guidefit.explain.modes_json import modes_from_result
+    from guidefit.model.measured import measured_mode
 
     have = {(m.run, m.label) for m in kept}
-    entries = [im.to_dict() for rr in identification.runs if rr.name in lowest for im in rr.modes
-               if im.label in labels and im.label != "extra" and (rr.name, im.label) not in have]
-    return modes_from_result({"modes": entries}, str(identification.file))[0] if entries else []
+    found = [im for rr in identification.runs if rr.name in lowest for im in rr.modes
+             if im.label in labels and im.label != "extra" and (rr.name, im.label) not in have]
+    return [measured_mode(im, f"{identification.file}: modes entry {k}") for k, im in enumerate(found)]
 
 
 #: Levels whose de-meaned frequencies have a chi-square p-value below this change with force.

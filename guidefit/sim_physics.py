@@ -22,7 +22,6 @@ from __future__ import annotations
 import itertools
 import math
 from dataclasses import dataclass, replace
-from pathlib import Path
 
 import numpy as np
 
@@ -105,12 +104,6 @@ def modal_damping(labels, overrides=None) -> np.ndarray:
     return np.array(out)
 
 
-def _as_guide(guide):
-    from guidefit.model.guides import load_guide
-
-    return load_guide(guide) if isinstance(guide, str | Path) else guide
-
-
 def _as_effects(effects) -> tuple:
     from guidefit.model.effects import Effect, make_effect, parse_effect
 
@@ -134,8 +127,9 @@ def build_model(guide, effects=(), damping=None) -> _Model:
     """
     from guidefit.model import vibration as vib
     from guidefit.model.effects import apply_effects
+    from guidefit.model.guides import as_guide
 
-    guide = _as_guide(guide)
+    guide = as_guide(guide)
     effects = _as_effects(effects)
     nominal_spec = vib.model_from_guide(guide)
     amplitude = [e for e in effects if e.name == "amplitude_dependence"]

@@ -104,7 +104,7 @@ import numpy as np
 
 from guidefit.errors import ModelError
 from guidefit.layouts import DEFAULT_RUNS, HammerRun
-from guidefit.model.guides import guide_reference
+from guidefit.model.guides import as_guide, guide_reference
 from guidefit.progress import progress_bar
 
 # the physics moved to sim_physics (issue 22); its public names stay importable from here
@@ -112,7 +112,6 @@ from guidefit.sim_physics import (  # noqa: F401
     DEFAULT_DAMPING,
     PALMGREN_EXPONENT,
     SUPPORT_DAMPING,
-    _as_guide,
     _decimate,
     _Model,
     adc,
@@ -560,7 +559,7 @@ def _description(seed: int) -> str:
 
 def _prepare(guide, effects, config):
     config = SimulationConfig() if config is None else config
-    guide = _as_guide(guide)
+    guide = as_guide(guide)
     _check_config(config, guide)
     faults = _faults(config)
     for f in faults:

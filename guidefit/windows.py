@@ -2,7 +2,9 @@
 every channel, the defaults chosen from the data, and the damping the exponential window adds.
 
 Part of the FRF stage (:mod:`guidefit.frf`, whose module docstring explains the windows and
-their effect on the FRF); every name here is also importable from :mod:`guidefit.frf`.
+their effect on the FRF); the windows and the correction are also importable from :mod:`guidefit.frf`.
+The windows of an FrfSet are rebuilt by :func:`window_settings_of` and its window's damping removed by
+:func:`undo_window_damping`, each the one place that does it.
 """
 
 from __future__ import annotations
@@ -318,7 +320,51 @@ def _choose(force, responses, sample_rate_hz, settings, pretrigger_samples) -> W
     return WindowChoice(trig, width, float(taper), tau, pulse_s, tail)
 
 
-def exponential_window_damping_correction(zeta_measured, f_n_hz, tau_s):
+def window_settings_of(frf) -> WindowSettings:
+    """The windows an :class:`~guidefit.frf.FrfSet` was computed with, as settings that apply them again.
+
+    For FRFs of some of its hits (a force bin) with the same windows: its
+    force window (width and taper; ``math.inf``: it had none) and its
+    exponential window (``math.inf``: none). The one way guidefit rebuilds
+    the windows from an FrfSet.
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace
+    >>> window_settings_of(SimpleNamespace(force_window_s=0.002, force_taper_s=0.0004, exp_window_tau_s=None))
+    ...     # doctest: +ELLIPSIS
+    WindowSettings(force_window_s=0.002, force_taper_s=0.0004, exp_tau_s=inf, ...)
+    """
+    width = frf.force_window_s
+    return WindowSettings(force_window_s=width if width else math.inf,
+                          force_taper_s=getattr(frf, "force_taper_s", None) if width else None,
+                          exp_tau_s=frf.exp_window_tau_s or math.inf)
+
+
+def undo_window_damping(frequency_hz, damping_ratio, frf):
+    """``(f_n_hz, zeta)`` of a pole fitted to the FRFs of ``frf`` without its exponential window's damping.
+
+    :func:`exponential_window_damping_correction` with the FrfSet's
+    ``exp_window_tau_s``; the inputs unchanged when it had no exponential
+    window. The one place guidefit applies the correction (identify's fits,
+    half-power and force levels, the nonlinear level estimator).
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace
+    >>> undo_window_damping(1000.0, 0.02, SimpleNamespace(exp_window_tau_s=None))
+    (1000.0, 0.02)
+    >>> f, z = undo_window_damping(1000.0, 0.02, SimpleNamespace(exp_window_tau_s=0.1))
+    >>> round(float(z), 5)  # 1/tau = 10 1/s of the 125.7 1/s decay was the window's
+    0.01841
+    """
+    tau = getattr(frf, "exp_window_tau_s", None)
+    if not tau:
+        return frequency_hz, damping_ratio
+    return exponential_window_damping_correction(damping_ratio, frequency_hz, tau, _stacklevel=3)
+
+
+def exponential_window_damping_correction(zeta_measured, f_n_hz, tau_s, *, _stacklevel: int = 2):
     """Undo the extra damping of an exponential window (exact pole shift).
 
     The window :math:`e^{-t/\\tau}` moves every pole by :math:`-\\sigma_w`,
@@ -371,7 +417,7 @@ def exponential_window_damping_correction(zeta_measured, f_n_hz, tau_s):
         warnings.warn(
             f"exponential-window correction gives negative damping (tau_s={tau_s}): "
             "the measured damping is below the window's 1/tau",
-            stacklevel=2,
+            stacklevel=_stacklevel,  # the warning names the line that asked for the correction
         )
     return (w_true / (2.0 * np.pi))[()], zeta_true[()]
 

@@ -17,15 +17,14 @@ from __future__ import annotations
 
 import json
 from dataclasses import replace
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
 from click.testing import CliRunner
 
 from guidefit.cli import main
-from guidefit.explain.settings import CARRIAGE_LABELS
 from guidefit.io import write_recording
+from guidefit.model.vibration import MODE_LABELS
 from guidefit.simulate import SimulationConfig, simulate
 
 CANDIDATES = "added_mass,contact_stiffness"
@@ -120,7 +119,7 @@ def test_force_levels_on_a_one_axis_layout_name_model_modes_only(spread):
     _, ident, _ = spread
     levels = ident.to_dict()["force_levels"]
     assert levels, "a 50-600 N spread over 6 hits gives force levels"
-    assert {lv["label"] for lv in levels} <= set(CARRIAGE_LABELS)
+    assert {lv["label"] for lv in levels} <= set(MODE_LABELS)
     assert {lv["run"] for lv in levels} == {"vertical", "lateral"}
 
 
@@ -150,8 +149,12 @@ def test_levels_of_ambiguous_or_extra_modes_are_left_out_not_refused(spread):
     assert len(levels) == len(data["force_levels"]) - 2
     with pytest.raises(Exception, match="must be one of"):  # a label that is no label at all is still an error
         modes_from_result({**data, "force_levels": [{**data["force_levels"][0], "label": "pitchh"}]}, "test")
-    wrapped = SimpleNamespace(to_dict=lambda: data, file=ident.file, guide=ident.guide, modes=ident.modes,
-                              runs=ident.runs)
+    # the same levels in the Identification's objects (explain reads those, not its JSON)
+    first = next(r for r in ident.runs if r.force_levels)
+    named = first.force_levels[0]
+    unnamed = [{**named, "label": "ambiguous"}, {**named, "label": "extra"}]
+    wrapped = replace(ident, runs=tuple(replace(r, force_levels=[*r.force_levels, *unnamed]) if r is first else r
+                                        for r in ident.runs))
     result = explain(wrapped, candidates=["contact_stiffness"])
     assert result.verdict == "adequate"
     assert not [n for n in result.notes if "must be one of" in n]

@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 import re
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -196,13 +197,14 @@ def test_an_effect_gathers_its_own_data_from_the_identification(monkeypatch):
 
     modes, _, _ = synthetic_modes(GUIDE, [make_effect("contact_stiffness", {"factor": 0.9})], seed=4)
 
-    class FakeIdentification:
+    class FakeIdentification:  # the parts of guidefit.identify.Identification that explain reads
         file = "fake.h5"
         guide = GUIDE
+        parameters, extra_modes, runs = {}, (), ()
 
-        def to_dict(self):
-            return {"guide": "MRB35", "modes": [{"label": m.label, "frequency_hz": m.frequency_hz,
-                                                 "frequency_std_hz": m.frequency_std_hz} for m in modes]}
+        def __init__(self):
+            self.modes = [SimpleNamespace(label=m.label, run=None, frequency_hz=m.frequency_hz, damping_ratio=None,
+                                          frequency_std_hz=m.frequency_std_hz, shape=None) for m in modes]
 
     seen = []
 

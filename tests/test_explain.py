@@ -13,6 +13,7 @@ from __future__ import annotations
 import itertools
 import json
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -25,6 +26,7 @@ from guidefit.explain import (
     explain,
     explain_identification,
     explain_modes,
+    modes_from_result,
     plot_explanation,
     read_modes_json,
     synthetic_modes,
@@ -436,23 +438,52 @@ def test_missing_file_is_a_recording_error(tmp_path):
         read_modes_json(tmp_path / "nope.json")
 
 
+def test_an_identification_and_its_json_give_the_same_explanation(tmp_path, monkeypatch):
+    """explain takes the Identification's objects (no JSON in between, no second read of the file); its
+    ``identify --json`` file read back gives the same modes, sensors and explanation."""
+    from pathlib import Path
+
+    from click.testing import CliRunner
+
+    from guidefit.cli import main
+    from guidefit.explain.modes_json import modes_from_identification
+    from guidefit.identify import identify
+
+    sample = Path(__file__).resolve().parents[1] / "sample_data" / "mrb35_sample.h5"
+    ident = identify(sample)
+    out = CliRunner().invoke(main, ["identify", str(sample), "--json"])
+    assert out.exit_code == 0, out.output
+    results = tmp_path / "results.json"
+    results.write_text(out.output, encoding="utf-8")
+    modes, sensors = modes_from_identification(ident)
+    json_modes, _, json_sensors, _ = modes_from_result(json.loads(out.output), str(results))
+    assert modes == json_modes and sensors == json_sensors and len(modes) >= 2 and len(sensors) >= 2
+
+    def no_second_read(*args, **kwargs):
+        raise AssertionError("explain read the recording again")
+
+    monkeypatch.setattr("guidefit.io.registry.read_recording", no_second_read)
+    monkeypatch.setattr("guidefit.recording.read_recording", no_second_read)
+    candidates = ["contact_stiffness", "added_mass", "amplitude_dependence"]
+    direct = explain_identification(ident, candidates=candidates).to_dict()
+    from_json = explain(results, candidates=candidates).to_dict()
+    assert direct.pop("file") == str(sample) and from_json.pop("file") == str(results)
+    assert direct == from_json
+
+
 def test_explain_identification_uses_modes_sensors_and_skips_bad_levels():
     modes, sensors, _ = synthetic_modes(GUIDE, [make_effect("contact_stiffness", {"factor": 0.9})], seed=4)
 
-    class FakeIdentification:  # the parts of guidefit.identify.Identification that explain reads
-        file = "fake.h5"
-        guide = GUIDE
+    # the parts of guidefit.identify.Identification that explain reads (its objects, not its JSON)
+    fake = SimpleNamespace(
+        file="fake.h5", guide=GUIDE, parameters={}, extra_modes=(),
+        modes=[SimpleNamespace(label=m.label, run=None, frequency_hz=m.frequency_hz, damping_ratio=None,
+                               frequency_std_hz=m.frequency_std_hz, shape={k: v.real for k, v in m.shape.items()})
+               for m in modes],
+        runs=[SimpleNamespace(channels=[SimpleNamespace(name=s.name, position_m=s.position_m, direction=s.direction)
+                                        for s in sensors], force_levels=[{"bin": 1}])])
 
-        def to_dict(self):
-            return {"guide": "MRB35", "modes": [{"label": m.label, "frequency_hz": m.frequency_hz,
-                                                 "frequency_std_hz": m.frequency_std_hz,
-                                                 "shape": {k: v.real for k, v in m.shape.items()}}
-                                                for m in modes],
-                    "sensors": [{"name": s.name, "position_m": list(s.position_m),
-                                 "direction": list(s.direction)} for s in sensors],
-                    "force_levels": [{"bin": 1}]}
-
-    result = explain_identification(FakeIdentification(), candidates=["contact_stiffness", "added_mass"])
+    result = explain_identification(fake, candidates=["contact_stiffness", "added_mass"])
     assert result.verdict == "explained" and result.effects[0]["name"] == "contact_stiffness"
     assert result.source == "fake.h5"
     assert any("force level skipped" in n for n in result.notes)

@@ -153,6 +153,29 @@ def test_frf_does_no_file_io():
         assert getattr(guidefit.frf, name) is getattr(guidefit.io.frf_files, name)
 
 
+def _reachable(edges: dict[str, set[str]], start) -> set[str]:
+    """Every module imported, directly or through others, by the modules ``start``."""
+    seen: set[str] = set()
+    stack = list(start)
+    while stack:
+        for w in edges[stack.pop()]:
+            if w not in seen:
+                seen.add(w)
+                stack.append(w)
+    return seen
+
+
+def test_the_model_does_not_depend_on_explain():
+    """The model (guides, static, vibration, effects, the measured data's types) stands beside the flow:
+    no module of guidefit.model imports guidefit.explain, not even through another module (amplitude_dependence
+    -> nonlinear -> explain.inputs was such a path), at module level or inside a function."""
+    edges = _import_graph(_modules())
+    model = [m for m in edges if m == "guidefit.model" or m.startswith("guidefit.model.")]
+    assert "guidefit.nonlinear" in _reachable(edges, model)  # the graph sees the function-level imports
+    explain = sorted(m for m in _reachable(edges, model) if m == "guidefit.explain" or m.startswith("guidefit.explain."))
+    assert explain == []
+
+
 def test_the_graph_check_finds_a_cycle():
     edges = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}
     assert _cycles(edges) == [["a", "b", "c"]]

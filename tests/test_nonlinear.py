@@ -56,6 +56,16 @@ def test_levels_follow_contact_loss(levels):
     assert all(math.isclose(lv.setup.pulse_s, 1e-4, rel_tol=0.02) for lv in levels)
 
 
+def test_levels_need_the_time_data(identification):
+    # identified from FRFs (no Recording with hits): no force levels, one line saying why
+    from dataclasses import replace
+
+    from guidefit.errors import RecordingError
+
+    with pytest.raises(RecordingError, match="no time data: force levels need the hits"):
+        measure_levels(replace(identification, recording=None))
+
+
 def test_forward_model_reproduces_the_simulation(levels):
     # at the true preload the forward model (fewer hits, lower rate, no noise) predicts every level
     # within its uncertainty
@@ -94,11 +104,18 @@ def test_apparent_mode_and_pulse():
     assert pulse_duration(force, 200e3) == pytest.approx(2e-4, rel=0.01)
 
 
-def test_explain_names_amplitude_dependence(identification, levels):
+def test_explain_names_amplitude_dependence(identification, levels, monkeypatch):
     # the done-when case, small: explain (amplitude_dependence against the global stiffness scale and the
     # vertical support that were its rivals) names the preload within 5 %, and the fitted preload
-    # reproduces every level within its uncertainty
+    # reproduces every level within its uncertainty; the levels' hits come from the recording identify
+    # read (Identification.recording), the file is not read again
     from guidefit.explain import explain_identification
+
+    def no_second_read(*args, **kwargs):
+        raise AssertionError("explain read the recording again")
+
+    monkeypatch.setattr("guidefit.io.registry.read_recording", no_second_read)
+    monkeypatch.setattr("guidefit.recording.read_recording", no_second_read)
 
     result = explain_identification(identification, candidates=["amplitude_dependence", "contact_stiffness",
                                                                  "support_compliance"])

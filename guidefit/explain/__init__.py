@@ -119,13 +119,12 @@ from __future__ import annotations
 
 from guidefit.explain.data import level_shape_scatter as _level_shape_scatter  # noqa: F401 - tests
 from guidefit.explain.entry import explain, explain_identification, fitted_spec, identify_for_explain
-from guidefit.explain.inputs import Explanation, ForceLevel, MeasuredMode, Sensor
+from guidefit.explain.inputs import Explanation
 from guidefit.explain.modes_json import modes_from_result, read_modes_json
 from guidefit.explain.pipeline import explain_modes
 from guidefit.explain.plot import plot_explanation
 from guidefit.explain.settings import (
     ACCEPT_P_VALUE,
-    CARRIAGE_LABELS,
     DEFAULT_FREQUENCY_STD,
     DEFAULT_HITS,
     DEFAULT_PULSE_S,
@@ -145,9 +144,10 @@ from guidefit.model.effects.amplitude_dependence import (
     DEFAULT_DECAY_DAMPING,
     effective_force,
 )
+from guidefit.model.measured import ForceLevel, MeasuredMode, Sensor
 
 __all__ = [
-    "ACCEPT_P_VALUE", "AMPLITUDE_MODEL_FORM", "AMPLITUDE_SHIFT_CAP", "CARRIAGE_LABELS", "DEFAULT_DECAY_DAMPING",
+    "ACCEPT_P_VALUE", "AMPLITUDE_MODEL_FORM", "AMPLITUDE_SHIFT_CAP", "DEFAULT_DECAY_DAMPING",
     "DEFAULT_FREQUENCY_STD", "DEFAULT_HITS", "DEFAULT_PULSE_S", "DEFAULT_SHAPE_STD", "EQUAL_BIC",
     "ESTIMATED_SHAPE_STD_FLOOR", "FORCE_LEVEL_FLOOR", "FREQUENCY_FLOOR", "IDENTIFIABLE_LOG_STD", "SHAPE_STD_FLOOR",
     "UNPAIRED_PENALTY", "Explanation", "ForceLevel", "MeasuredMode", "Sensor", "default_sensors",

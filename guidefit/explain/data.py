@@ -16,10 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from guidefit.errors import RecordingError
-from guidefit.explain.inputs import ForceLevel, MeasuredMode
 from guidefit.explain.settings import (
     ACCEPT_P_VALUE,
-    CARRIAGE_LABELS,
     DEFAULT_FREQUENCY_STD,
     DEFAULT_HITS,
     DEFAULT_PULSE_S,
@@ -33,6 +31,8 @@ from guidefit.explain.settings import (
 )
 from guidefit.model.effects import LevelData
 from guidefit.model.effects.amplitude_dependence import effective_force
+from guidefit.model.measured import ForceLevel, MeasuredMode
+from guidefit.model.vibration import MODE_LABELS
 
 
 @dataclass(frozen=True)
@@ -137,7 +137,7 @@ def finite_positive(x) -> bool:
 
 def default_sensor_map(guide, channels) -> dict:
     """Sensors for channel names acc_<point>_<axis> from the guide's measuring points."""
-    from guidefit.explain.inputs import Sensor
+    from guidefit.model.measured import Sensor
 
     axes = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
     out = {}
@@ -278,7 +278,7 @@ def _checked_level(j: int, lv) -> _Level | None:
     lab = canonical_label(lv.label)
     if lab is None:
         raise RecordingError(f"force level {j}: label '{lv.label}' is not a carriage mode label "
-                             f"({', '.join(CARRIAGE_LABELS)})")
+                             f"({', '.join(MODE_LABELS)})")
     if lv.frequency_hz is None:
         return None
     forces = np.asarray(lv.hit_forces_n if lv.hit_forces_n else [lv.peak_force_n], float)

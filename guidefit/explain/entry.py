@@ -6,7 +6,7 @@ from pathlib import Path
 
 from guidefit.errors import RecordingError
 from guidefit.explain.inputs import Explanation
-from guidefit.explain.modes_json import is_unnamed_level, level_from, modes_from_result, read_modes_json
+from guidefit.explain.modes_json import is_unnamed_level, level_from, modes_from_identification, read_modes_json
 from guidefit.explain.pipeline import explain_modes
 
 
@@ -37,12 +37,15 @@ def _effects_prepare(identification, candidates, modes: list, levels: list, note
 
 
 def explain_identification(identification, candidates=None, progress=None) -> Explanation:
-    """Explain the modes of an :class:`~guidefit.identify.Identification` (modes, extra modes,
-    sensors and force levels of its JSON form, and what the candidate effects' ``prepare`` hooks gather)."""
-    data = identification.to_dict()
+    """Explain the modes of an :class:`~guidefit.identify.Identification`, taken from its objects.
+
+    Its modes, extra modes and sensors (:func:`modes_from_identification`),
+    its runs' force levels, and what the candidate effects' ``prepare``
+    hooks gather from it; the file is not read again.
+    """
     where = str(identification.file)
-    raw_levels = data.pop("force_levels", None) or []
-    modes, _, sensors, _ = modes_from_result(data, where)
+    modes, sensors = modes_from_identification(identification)
+    raw_levels = [lv for run in identification.runs for lv in run.force_levels]
     levels, notes = [], []
     unnamed = sorted({str(e["label"]) for e in raw_levels if is_unnamed_level(e)})
     if unnamed:  # identify gives none; a caller's own Identification may
@@ -75,7 +78,7 @@ def explain(source, guide=None, candidates=None, progress=None, settings=None) -
     """
     from guidefit.model.guides import load_guide
 
-    if hasattr(source, "to_dict") and hasattr(source, "modes"):
+    if hasattr(source, "runs") and hasattr(source, "modes"):
         return explain_identification(source, candidates, progress)
     path = Path(source)
     if path.suffix.lower() in (".json", ".jsonl", ".ndjson"):

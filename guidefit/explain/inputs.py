@@ -1,4 +1,5 @@
-"""The input and result types of ``guidefit explain``: measured modes, sensors, force levels, the Explanation."""
+"""The result type of ``guidefit explain``, the Explanation (its input types, measured modes, sensors and force
+levels, are :mod:`guidefit.model.measured`'s)."""
 
 from __future__ import annotations
 
@@ -6,65 +7,6 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-
-
-@dataclass(frozen=True)
-class MeasuredMode:
-    """An identified mode: frequency with its standard deviation, optional label and shape.
-
-    ``frequency_std_hz=None`` means unknown (:data:`~guidefit.explain.settings.DEFAULT_FREQUENCY_STD` applies).
-    ``shape`` maps sensor channel names to modal amplitudes (any scale and phase);
-    ``shape_std`` is its relative per-channel noise (default: estimated, see docs/explain.md).
-    Modes of different ``run`` are paired with the model separately.
-    """
-
-    frequency_hz: float
-    frequency_std_hz: float | None
-    damping_ratio: float | None = None
-    label: str | None = None
-    shape: dict | None = None
-    run: str | None = None
-    shape_std: float | None = None
-
-
-@dataclass(frozen=True)
-class Sensor:
-    """A response channel: name, position (m, carriage frame) and unit direction."""
-
-    name: str
-    position_m: tuple
-    direction: tuple
-
-
-@dataclass(frozen=True)
-class ForceLevel:
-    """The frequency of one mode identified from the hits of one force bin.
-
-    ``hit_position_m``, ``hit_direction`` and ``pulse_s`` describe the hits
-    (defaults: :data:`~guidefit.explain.settings.DEFAULT_HITS` for the label and
-    :data:`~guidefit.explain.settings.DEFAULT_PULSE_S`).
-    ``hit_forces_n``: the peak force of every hit of the bin (H1 weights a
-    hit by its force squared; default: ``peak_force_n`` for all).
-    ``band_hz``: the band of the refit that gave the frequency (default
-    ``+/- max(3 zeta, 3 %)``). ``frequency_hz`` None: the bin's hits did not
-    reproduce the mode (identify's refit moved it by more than its
-    half-power half-bandwidth or failed). ``shape``: the mode's modal
-    constants per channel from that refit.
-    """
-
-    peak_force_n: float
-    label: str
-    frequency_hz: float | None
-    frequency_std_hz: float | None
-    hit_position_m: tuple | None = None
-    hit_direction: tuple | None = None
-    pulse_s: float | None = None
-    run: str | None = None
-    hit_forces_n: tuple | None = None
-    band_hz: tuple | None = None
-    shape: dict | None = None
-    measured: object = field(default=None, repr=False, compare=False)  # guidefit.nonlinear.MeasuredLevel
-
 
 # --------------------------------------------------------------------------- result
 

@@ -1,56 +1,28 @@
-"""Read identified modes: ``identify --json`` output or a hand-written list (:func:`read_modes_json`)."""
+"""The measured modes explain starts from: an Identification's objects (:func:`modes_from_identification`), or
+``identify --json`` output or a hand-written list (:func:`read_modes_json`, :func:`modes_from_result`)."""
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
-import numpy as np
-
 from guidefit.errors import RecordingError
-from guidefit.explain.inputs import ForceLevel, MeasuredMode, Sensor
-from guidefit.explain.settings import CARRIAGE_LABELS, canonical_label
-from guidefit.modeshapes import UNNAMED_LABELS
-
-
-def _number(value, what: str, positive: bool = True, allow_none: bool = False):
-    if value is None and allow_none:
-        return None
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value) \
-            or (positive and value <= 0):
-        kind = "a positive number" if positive else "a finite number"
-        raise RecordingError(f"{what} must be {kind}{' or null' if allow_none else ''}, got {value!r}")
-    return float(value)
-
-
-def _vector3(value, what: str) -> tuple:
-    if not isinstance(value, list | tuple) or len(value) != 3:
-        raise RecordingError(f"{what} must be a list of 3 numbers, got {value!r}")
-    return tuple(_number(v, what, positive=False) for v in value)
-
-
-def _shape(value, what: str) -> dict | None:
-    if value is None:
-        return None
-    if not isinstance(value, dict):
-        raise RecordingError(f"{what} must be an object of channel: amplitude, got {type(value).__name__}")
-    out = {}
-    for name, v in value.items():
-        if isinstance(v, list | tuple) and len(v) == 2:
-            out[str(name)] = complex(_number(v[0], f"{what} '{name}'", positive=False),
-                                     _number(v[1], f"{what} '{name}'", positive=False))
-        elif isinstance(v, dict) and set(v) <= {"re", "im"}:
-            out[str(name)] = complex(_number(v.get("re", 0.0), f"{what} '{name}'", positive=False),
-                                     _number(v.get("im", 0.0), f"{what} '{name}'", positive=False))
-        else:
-            out[str(name)] = complex(_number(v, f"{what} '{name}'", positive=False))
-    return out
+from guidefit.explain.settings import canonical_label
+from guidefit.model.measured import (
+    ForceLevel,
+    MeasuredMode,
+    checked_number,
+    checked_sensor,
+    checked_shape,
+    checked_vector3,
+    measured_mode,
+)
+from guidefit.model.vibration import MODE_LABELS, UNNAMED_LABELS
 
 
 def _std_of(entry: dict, what: str):
     for key in ("frequency_std_hz", "std_hz", "std"):
         if key in entry:
-            return _number(entry[key], f"{what}: '{key}'", allow_none=True)
+            return checked_number(entry[key], f"{what}: '{key}'", allow_none=True)
     return None
 
 
@@ -64,14 +36,14 @@ def _mode_from(entry, what: str, default_label: str | None = None) -> MeasuredMo
         raise RecordingError(f"{what}: 'label' must be a string, got {label!r}")
     run = entry.get("run")
     return MeasuredMode(
-        frequency_hz=_number(entry["frequency_hz"], f"{what}: 'frequency_hz'"),
+        frequency_hz=checked_number(entry["frequency_hz"], f"{what}: 'frequency_hz'"),
         frequency_std_hz=_std_of(entry, what),
-        damping_ratio=_number(entry.get("damping_ratio"), f"{what}: 'damping_ratio'", positive=False,
+        damping_ratio=checked_number(entry.get("damping_ratio"), f"{what}: 'damping_ratio'", positive=False,
                               allow_none=True),
         label=label,
-        shape=_shape(entry.get("shape"), f"{what}: 'shape'"),
+        shape=checked_shape(entry.get("shape"), f"{what}: 'shape'"),
         run=None if run is None else str(run),
-        shape_std=_number(entry.get("shape_std"), f"{what}: 'shape_std'", allow_none=True),
+        shape_std=checked_number(entry.get("shape_std"), f"{what}: 'shape_std'", allow_none=True),
     )
 
 
@@ -92,7 +64,7 @@ def level_from(entry, what: str) -> ForceLevel:
         if key not in entry:
             raise RecordingError(f"{what}: '{key}' missing")
     if canonical_label(entry["label"]) is None:
-        raise RecordingError(f"{what}: 'label' must be one of {', '.join(CARRIAGE_LABELS)}, got {entry['label']!r}")
+        raise RecordingError(f"{what}: 'label' must be one of {', '.join(MODE_LABELS)}, got {entry['label']!r}")
     pos, direction = entry.get("hit_position_m"), entry.get("hit_direction")
     forces, band = entry.get("hit_forces_n"), entry.get("band_hz")
     if forces is not None and (not isinstance(forces, list) or not forces):
@@ -101,18 +73,43 @@ def level_from(entry, what: str) -> ForceLevel:
         raise RecordingError(f"{what}: 'band_hz' must be [low, high], got {band!r}")
     # frequency_hz null: identify's refit of the bin's hits did not reproduce the mode
     return ForceLevel(
-        peak_force_n=_number(entry["peak_force_n"], f"{what}: 'peak_force_n'"),
+        peak_force_n=checked_number(entry["peak_force_n"], f"{what}: 'peak_force_n'"),
         label=str(entry["label"]),
-        frequency_hz=_number(entry["frequency_hz"], f"{what}: 'frequency_hz'", allow_none=True),
+        frequency_hz=checked_number(entry["frequency_hz"], f"{what}: 'frequency_hz'", allow_none=True),
         frequency_std_hz=None if entry["frequency_hz"] is None else _std_of(entry, what),
-        hit_forces_n=None if forces is None else tuple(_number(x, f"{what}: 'hit_forces_n'") for x in forces),
-        band_hz=None if band is None else tuple(_number(x, f"{what}: 'band_hz'") for x in band),
-        shape=_shape(entry.get("shape"), f"{what}: 'shape'"),
-        hit_position_m=None if pos is None else _vector3(pos, f"{what}: 'hit_position_m'"),
-        hit_direction=None if direction is None else _vector3(direction, f"{what}: 'hit_direction'"),
-        pulse_s=_number(entry.get("pulse_s"), f"{what}: 'pulse_s'", allow_none=True),
+        hit_forces_n=None if forces is None else tuple(checked_number(x, f"{what}: 'hit_forces_n'") for x in forces),
+        band_hz=None if band is None else tuple(checked_number(x, f"{what}: 'band_hz'") for x in band),
+        shape=checked_shape(entry.get("shape"), f"{what}: 'shape'"),
+        hit_position_m=None if pos is None else checked_vector3(pos, f"{what}: 'hit_position_m'"),
+        hit_direction=None if direction is None else checked_vector3(direction, f"{what}: 'hit_direction'"),
+        pulse_s=checked_number(entry.get("pulse_s"), f"{what}: 'pulse_s'", allow_none=True),
         run=None if entry.get("run") is None else str(entry["run"]),
     )
+
+
+def _with_joint_parameters(modes: list, params: dict, where: str) -> list:
+    """The modes completed by the joint parameters f_V and f_H (value and std) of an identification.
+
+    A vertical or roll_low mode that is missing is added from its parameter;
+    one of the same frequency without a standard deviation takes the parameter's.
+    """
+    modes = list(modes)
+    for key, label in (("f_V", "vertical"), ("f_H", "roll_low")):
+        p = params.get(key)
+        if not isinstance(p, dict) or p.get("value") is None:
+            continue
+        value = checked_number(p["value"], f"{where}: parameters '{key}' value")
+        std = checked_number(p.get("std"), f"{where}: parameters '{key}' std", allow_none=True)
+        same = [k for k, m in enumerate(modes) if canonical_label(m.label) == label]
+        if not same:
+            modes.append(MeasuredMode(value, std, label=label))
+        elif std is not None:
+            for k in same:
+                if modes[k].frequency_std_hz is None and abs(modes[k].frequency_hz - value) <= 1e-6 * value:
+                    m = modes[k]
+                    modes[k] = MeasuredMode(m.frequency_hz, std, m.damping_ratio, m.label, m.shape, m.run,
+                                            m.shape_std)
+    return modes
 
 
 def modes_from_result(obj, where: str = "modes"):
@@ -152,21 +149,7 @@ def modes_from_result(obj, where: str = "modes"):
     params = root.get("parameters") or {}
     if not isinstance(params, dict):
         raise RecordingError(f"{where}: 'parameters' must be an object")
-    for key, label in (("f_V", "vertical"), ("f_H", "roll_low")):
-        p = params.get(key)
-        if not isinstance(p, dict) or p.get("value") is None:
-            continue
-        value = _number(p["value"], f"{where}: parameters '{key}' value")
-        std = _number(p.get("std"), f"{where}: parameters '{key}' std", allow_none=True)
-        same = [k for k, m in enumerate(modes) if canonical_label(m.label) == label]
-        if not same:
-            modes.append(MeasuredMode(value, std, label=label))
-        elif std is not None:
-            for k in same:
-                if modes[k].frequency_std_hz is None and abs(modes[k].frequency_hz - value) <= 1e-6 * value:
-                    m = modes[k]
-                    modes[k] = MeasuredMode(m.frequency_hz, std, m.damping_ratio, m.label, m.shape, m.run,
-                                            m.shape_std)
+    modes = _with_joint_parameters(modes, params, where)
     if not modes:
         raise RecordingError(f"{where}: no modes")
     guide = root.get("guide")
@@ -177,11 +160,7 @@ def modes_from_result(obj, where: str = "modes"):
         what = f"{where}: sensors entry {k}"
         if not isinstance(s, dict) or "name" not in s:
             raise RecordingError(f"{what}: expected an object with name, position_m, direction")
-        d = np.asarray(_vector3(s.get("direction"), f"{what}: 'direction'"))
-        if not np.linalg.norm(d) > 0:
-            raise RecordingError(f"{what}: 'direction' must not be zero")
-        sensors.append(Sensor(str(s["name"]), _vector3(s.get("position_m"), f"{what}: 'position_m'"),
-                              tuple(d / np.linalg.norm(d))))
+        sensors.append(checked_sensor(s["name"], s.get("position_m"), s.get("direction"), what))
     raw_levels = root.get("force_levels") or []
     if not isinstance(raw_levels, list):
         raise RecordingError(f"{where}: 'force_levels' must be a list")
@@ -234,3 +213,28 @@ def read_modes_json(path):
     return modes_from_result(obj, str(p))
 
 
+
+
+def modes_from_identification(identification) -> tuple[list, list]:
+    """Measured modes and sensors of an :class:`~guidefit.identify.Identification`, from its objects.
+
+    The same modes and sensors as :func:`modes_from_result` gives for its
+    ``identify --json`` object (``tests/test_explain.py`` compares the two):
+    its modes and extra modes (:func:`guidefit.model.measured.measured_mode`),
+    completed by the joint parameters f_V and f_H, and the response channels
+    of its runs, first occurrence of each name. Its force levels are the
+    caller's (:func:`guidefit.explain.entry.explain_identification`).
+    """
+    where = str(identification.file)
+    modes = [measured_mode(m, f"{where}: modes entry {k}") for k, m in enumerate(identification.modes)]
+    modes += [measured_mode(m, f"{where}: extra_modes entry {k}") for k, m in enumerate(identification.extra_modes)]
+    modes = _with_joint_parameters(modes, identification.parameters or {}, where)
+    if not modes:
+        raise RecordingError(f"{where}: no modes")
+    channels: dict = {}
+    for run in identification.runs:
+        for ch in run.channels:
+            channels.setdefault(ch.name, ch)
+    sensors = [checked_sensor(ch.name, [float(x) for x in ch.position_m], [float(x) for x in ch.direction],
+                              f"{where}: sensors entry {k}") for k, ch in enumerate(channels.values())]
+    return modes, sensors

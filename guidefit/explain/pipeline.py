@@ -16,10 +16,11 @@ from dataclasses import replace
 from guidefit.explain.candidates import fit_candidates
 from guidefit.explain.data import prepare
 from guidefit.explain.evaluation import Context
-from guidefit.explain.inputs import Explanation, ForceLevel, MeasuredMode
+from guidefit.explain.inputs import Explanation
 from guidefit.explain.selection import bic, is_accepted, select
 from guidefit.explain.settings import canonical_label
 from guidefit.explain.verdict import decide, explanation, pairing_notes, trend_notes
+from guidefit.model.measured import ForceLevel, MeasuredMode
 
 
 def explain_modes(measured, guide, sensors=(), force_levels=(), candidates=None, progress=None,

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from guidefit.model.vibration import MODE_LABELS
+
 #: Model-form floor of a mode's relative frequency uncertainty (0.05 %).
 FREQUENCY_FLOOR = 5.0e-4
 #: Floor of a force level's relative frequency uncertainty (0.1 %): the model-form error of the predicted
@@ -32,7 +34,6 @@ PAIR_PARTNER_VARIANTS = 6
 #: Half-sine hammer pulse duration (s) when a force level gives none: 0.1 ms, a steel tip.
 DEFAULT_PULSE_S = 1.0e-4
 
-CARRIAGE_LABELS = ("vertical", "pitch", "yaw", "roll_low", "roll_high")
 #: Motion group of a label (v, theta, psi, u+phi): the energy share the pairing compares.
 LABEL_GROUP = {"vertical": 0, "pitch": 1, "yaw": 2, "roll_low": 3, "roll_high": 3}
 LABEL_ALIASES = {"v": "vertical", "f_v": "vertical", "h": "roll_low", "f_h": "roll_low",
@@ -55,7 +56,7 @@ def canonical_label(label):
     if label is None:
         return None
     low = str(label).strip().lower()
-    if low in CARRIAGE_LABELS:
+    if low in MODE_LABELS:
         return low
     return LABEL_ALIASES.get(low)
 

@@ -6,8 +6,9 @@ import math
 
 import numpy as np
 
-from guidefit.explain.inputs import ForceLevel, MeasuredMode, Sensor
 from guidefit.explain.settings import DEFAULT_HITS, DEFAULT_PULSE_S
+from guidefit.model.measured import ForceLevel, MeasuredMode, Sensor
+from guidefit.model.vibration import JOINT_LABELS
 
 
 def default_sensors(guide, axes: str = "xy") -> list:
@@ -80,7 +81,7 @@ def synthetic_modes(guide, effects=(), sensors=None, frequency_std: float = 1e-3
                                                                 DEFAULT_PULSE_S), amp, c_all)
 
     labels = list(sol.labels)
-    for lab in ("vertical", "roll_low") if forces else ():
+    for lab in JOINT_LABELS.values() if forces else ():
         j = labels.index(lab)
         for force in forces:
             f = freq_at(j, lab, force)
@@ -88,7 +89,7 @@ def synthetic_modes(guide, effects=(), sensors=None, frequency_std: float = 1e-3
     w2 = np.square(forces)
     modes = []
     for j, lab in enumerate(labels):
-        if forces and lab in ("vertical", "roll_low"):  # H1 over all hits: the F^2-weighted mean
+        if forces and lab in JOINT_LABELS.values():  # H1 over all hits: the F^2-weighted mean
             f = float(np.sum(w2 * [freq_at(j, lab, force) for force in forces]) / np.sum(w2))
         else:
             f = float(sol.frequencies_hz[j])

@@ -280,6 +280,15 @@ def load_guide(name_or_path: str | Path) -> Guide:
     return _parse(text, str(path), str(path))
 
 
+def as_guide(guide) -> Guide:
+    """A :class:`Guide` from a guide or its name or file (:func:`load_guide`); a guide is returned as is.
+
+    >>> as_guide("MRB35").name == as_guide(as_guide("MRB35")).name
+    True
+    """
+    return load_guide(guide) if isinstance(guide, str | Path) else guide
+
+
 def _parse(text: str, where: str, source: str) -> Guide:
     import tomllib
 

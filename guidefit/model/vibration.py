@@ -48,7 +48,14 @@ import numpy as np
 from guidefit.errors import ModelError
 
 CARRIAGE_DOFS = ("u", "v", "theta", "psi", "phi")
+# the labels and the label lists of guidefit, one home: every module imports them from here
+#: The carriage modes of the model, by the motion that dominates each (:func:`solve_modes` names them).
 MODE_LABELS = ("vertical", "pitch", "yaw", "roll_low", "roll_high")
+#: The joint parameters' modes (Eq. 24-29): K_V, c_V from the vertical mode, K_H, c_H from roll_low.
+JOINT_LABELS = {"V": "vertical", "H": "roll_low"}
+#: Labels of identified modes that name no model mode: a peak the model does not predict (``extra``) and a
+#: mode the layout cannot tell between two or more model modes (``ambiguous``, with ``candidates``).
+UNNAMED_LABELS = ("extra", "ambiguous")
 
 
 @dataclass(frozen=True)

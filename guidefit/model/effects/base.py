@@ -308,8 +308,8 @@ class EffectDef:
         force levels across runs that differ only in hit force); called by
         :func:`guidefit.explain.explain_identification` for every candidate
         effect, in library order. ``modes`` are
-        :class:`~guidefit.explain.MeasuredMode`, ``levels``
-        :class:`~guidefit.explain.ForceLevel`; a
+        :class:`~guidefit.model.measured.MeasuredMode`, ``levels``
+        :class:`~guidefit.model.measured.ForceLevel` (the model's own types, no import of explain); a
         :class:`~guidefit.errors.GuidefitError` becomes a note.
     ambiguity : callable, optional
         ``ambiguity(tags) -> str | None``: a note for when several of its
