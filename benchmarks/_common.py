@@ -209,7 +209,7 @@ def write_hits_file(path: Path, records: np.ndarray, header, n_hits: int, bar=No
 
     import h5py
 
-    from guidefit.recording import RecordingData, write_recording
+    from guidefit.io import RecordingData, write_recording
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -57,7 +57,7 @@ def sample_config():
 
 def simulate_and_identify(config, seed: int):
     from guidefit.identify import identify
-    from guidefit.recording import write_recording
+    from guidefit.io import write_recording
     from guidefit.simulate import simulate
 
     data, truth = simulate("MRB35", config=config, seed=seed)

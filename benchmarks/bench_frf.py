@@ -82,7 +82,7 @@ def w_imports(path):
     import scipy.fft
     import scipy.signal  # noqa: F401
 
-    from guidefit import frf, hits, recording  # noqa: F401
+    from guidefit import frf, hits  # noqa: F401
 
     return {"seconds": 0.0, "n_samples": 0}
 
@@ -120,7 +120,7 @@ def _guidefit(path, **options):
     """``compute_frf(run, iter_hits(run), **options)`` on the file's first run, timed."""
     from guidefit.frf import compute_frf
     from guidefit.hits import iter_hits
-    from guidefit.recording import read_recording
+    from guidefit.io import read_recording
 
     t = time.perf_counter()
     run = read_recording(path).runs[0]
@@ -157,7 +157,7 @@ def w_guidefit_core(path):
 
 def w_iter_hits(path):
     from guidefit.hits import iter_hits
-    from guidefit.recording import read_recording
+    from guidefit.io import read_recording
 
     t = time.perf_counter()
     run = read_recording(path).runs[0]

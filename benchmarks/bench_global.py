@@ -56,8 +56,8 @@ SCRATCH = Path(os.environ.get("GUIDEFIT_BENCH_DIR", "/tmp/guidefit-bench"))
 
 def recording(case: str, seed: int, hits: int, record_s: float) -> tuple[Path, dict]:
     """Simulate (cached) one case; returns the file and its truth."""
+    from guidefit.io import write_recording
     from guidefit.model.effects import parse_effect
-    from guidefit.recording import write_recording
     from guidefit.simulate import SimulationConfig, simulate
 
     SCRATCH.mkdir(parents=True, exist_ok=True)

@@ -83,7 +83,7 @@ def w_frf_all(path):
     """``compute_frf(run, iter_hits(run))`` of every run, timed."""
     from guidefit.frf import compute_frf
     from guidefit.hits import iter_hits
-    from guidefit.recording import read_recording
+    from guidefit.io import read_recording
 
     t = time.perf_counter()
     n = 0
@@ -114,7 +114,7 @@ print(acc)
 
 def one_axis_file(path: Path, hits_per_run: int, bar=None) -> None:
     """The paper's two runs, one axis per run (guidefit.simulate, --sensors default), float32, uncompressed."""
-    from guidefit.recording import write_recording
+    from guidefit.io import write_recording
     from guidefit.simulate import SimulationConfig, simulate
 
     cfg = SimulationConfig(hits=hits_per_run, record_s=F.RECORD_S, sensor_layout="default")
@@ -159,8 +159,6 @@ def main() -> None:
     if args.worker:
         name, path = args.worker
         F.w_imports(path)
-        import guidefit.globalfit
-        import guidefit.identify  # noqa: F401
 
         cpu0 = C.cpu_times()
         out = WORKERS[name](path)

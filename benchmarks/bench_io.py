@@ -64,7 +64,7 @@ def worker(path: str) -> None:
     try:
         from guidefit.io import open_reader, read_recording
     except ImportError:  # before guidefit.io
-        from guidefit.recording import open_reader, read_recording
+        from guidefit.io import open_reader, read_recording
 
     rec = read_recording(path)
     t_open = time.perf_counter() - t0

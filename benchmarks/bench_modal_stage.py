@@ -5,7 +5,7 @@ recording: LSCF stabilisation diagram, pole selection, variable-projection
 refinement, jackknife over hit groups, selection spread, per-run estimates,
 shapes and labels. Each process (a fresh interpreter, as identify's first
 call in bench_identify_e2e.py: ``guidefit.identify`` and
-``guidefit.globalfit`` imported first) reads the FRFs, then times the stage
+``guidefit.modes.globalfit`` imported first) reads the FRFs, then times the stage
 once (first call: lazy imports and one-off set-up included) and 6 more times
 (warm: their median). Processes alternate between the codes compared; the
 table gives the median over processes and every process's value.
@@ -45,12 +45,12 @@ WARM_CALLS = 6
 
 def worker(path: str) -> None:
     """Child: FRFs of ``path``, then the modal stage once (first) and WARM_CALLS times; JSON on stdout."""
-    import guidefit.globalfit
     import guidefit.identify
+    import guidefit.modes.globalfit
     from guidefit.identify import IdentifySettings, _global_pass, frf_top_hz, run_frfs
+    from guidefit.io import read_recording
     from guidefit.model import vibration as vib
     from guidefit.model.guides import load_guide
-    from guidefit.recording import read_recording
 
     guide = load_guide("MRB35")
     model = vib.solve_modes(vib.model_from_guide(guide))
@@ -64,7 +64,7 @@ def worker(path: str) -> None:
         cpu.append(time.process_time() - c0)
     C.emit({"first_s": wall[0], "warm_s": statistics.median(wall[1:]), "first_cpu_s": cpu[0],
             "warm_cpu_s": statistics.median(cpu[1:]), "n_modes": 0 if res is None else len(res.fit.modes),
-            "module": guidefit.globalfit.__file__})
+            "module": guidefit.modes.globalfit.__file__})
 
 
 def run_child(path: Path, code: Path | None) -> dict:

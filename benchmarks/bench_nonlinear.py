@@ -71,9 +71,9 @@ def main() -> None:
     args = ap.parse_args()
 
     from guidefit.explain import explain, identify_for_explain
+    from guidefit.io import write_recording
     from guidefit.model.guides import load_guide
     from guidefit.nonlinear import ForwardModel, fit_levels, measure_levels, simulate_force_levels
-    from guidefit.recording import write_recording
 
     guide = load_guide("MRB35")
     forces = [float(x) for x in args.forces.split(",")]

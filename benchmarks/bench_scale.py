@@ -1,7 +1,7 @@
 """Long continuous recordings: wall time and peak RSS of ``guidefit frf`` and ``identify``.
 
 Data: one ``signals`` run (force + acc_A..D_y, float32, 200 kHz: 4 MB/s)
-written block by block with ``guidefit.recording.open_signals_writer``. The
+written block by block with ``guidefit.io.open_signals_writer``. The
 content is 1 s per hit: a 0.5 s hit record of a small guidefit simulation
 (10 hits, vertical run, default measurement chain, tiled with a random gain
 0.6-1.4 per copy, same on force and responses) followed by 0.5 s of quiet:
@@ -45,7 +45,7 @@ def quiet(n: int, n_ch: int, rng) -> np.ndarray:
 
 def write_signals(path: Path, records: np.ndarray, header, size_gb: float, bar) -> int:
     """Write about ``size_gb`` GB; returns the number of hits."""
-    from guidefit.recording import open_signals_writer
+    from guidefit.io import open_signals_writer
 
     n_ch = records.shape[2]
     per_hit = int((HIT_S + GAP_S) * FS) * n_ch * 4

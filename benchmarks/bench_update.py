@@ -19,7 +19,7 @@ from pathlib import Path
 
 from _common import md_table, print_load, print_machine
 
-from guidefit.update import update
+from guidefit.machine.update import update
 
 EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "machine"
 

@@ -65,8 +65,8 @@ OTHER_TOL = 1e-7
 
 def simulated(case: str, seed: int = 1, hits: int = 8, record_s: float = 0.05) -> Path:
     """One coupled case of bench_global.py (simulated once, then read from the cache)."""
+    from guidefit.io import write_recording
     from guidefit.model.effects import parse_effect
-    from guidefit.recording import write_recording
     from guidefit.simulate import SimulationConfig, simulate
 
     SCRATCH.mkdir(parents=True, exist_ok=True)

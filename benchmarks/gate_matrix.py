@@ -84,7 +84,7 @@ def _edit(data, channel=None, factor=1.0, take_from=None):
 
 def _relres(result, path) -> float:
     from guidefit import consistency as cons
-    from guidefit.recording import read_recording
+    from guidefit.io import read_recording
 
     modes = [m for run in result.runs for m in run.modes]
     sets = cons._normalised(cons.shape_sets(result.runs, modes, cons._hit_points(read_recording(path))))
@@ -94,7 +94,7 @@ def _relres(result, path) -> float:
 
 def row(name, data, truth, folder: Path) -> str:
     from guidefit.identify import IdentifySettings, identify
-    from guidefit.recording import write_recording
+    from guidefit.io import write_recording
 
     path = folder / f"{abs(hash(name))}.h5"
     write_recording(path, data)

@@ -37,8 +37,8 @@ TOL = {"f": 1e-3, "zeta": 0.05}
 def cell(effect: str, layout: str, seed: int, hits: int, record_s: float, folder: str, do_explain: bool) -> dict:
     from guidefit.errors import GuidefitError
     from guidefit.identify import IdentifySettings, identify
+    from guidefit.io import write_recording
     from guidefit.model.effects import parse_effect
-    from guidefit.recording import write_recording
     from guidefit.simulate import SimulationConfig, simulate
 
     cfg = SimulationConfig(hits=hits, record_s=record_s, sensor_layout=layout)

@@ -22,7 +22,7 @@ _LAZY = {
     "simulate": "guidefit.simulate",
     "explain": "guidefit.explain",
     "load_guide": ("guidefit.model.guides", "load_guide"),
-    "read_recording": ("guidefit.recording", "read_recording"),
+    "read_recording": ("guidefit.io", "read_recording"),
 }
 
 

@@ -253,8 +253,9 @@ def plan_cmd(setup, guide_name, layout, hit_texts, no_search, as_json, plot_path
     SETUP is a test setup TOML (its DAQ files need not exist yet) or a recording; without it,
     --sensors on the default runs (vertical hit along -y on the top face, lateral along -x on the side).
     """
-    from guidefit import layouts, report
+    from guidefit import report
     from guidefit.plan import plan
+    from guidefit.simulate import layouts
 
     _refuse([plot_path], [setup, _guide_file(guide_name), _guide_file(layout)])  # a layout TOML too
     _plot_file(plot_path)
@@ -407,7 +408,7 @@ def identify_cmd(files, guide_name, estimator, as_json, csv_path, summary_path, 
         with _written(target) as tmp:
             report.write_summary_csv([j.row for j in judged], tmp)
     if junit_path:
-        from guidefit.check import junit_xml
+        from guidefit.report.check import junit_xml
 
         with _written(junit_path) as tmp:
             junit_xml([j.outcome for j in judged], tmp, time.perf_counter() - started)
@@ -427,10 +428,10 @@ def _plot_targets(files, plot_path) -> dict:
 
 
 def _check_spec(check_path):
-    """The ``--check`` tolerance spec (:func:`guidefit.check.load_spec`), None without the option."""
+    """The ``--check`` tolerance spec (:func:`guidefit.report.check.load_spec`), None without the option."""
     if not check_path:
         return None
-    from guidefit.check import load_spec
+    from guidefit.report.check import load_spec
 
     try:
         return load_spec(check_path)
@@ -474,7 +475,7 @@ def _judge_file(path, code, result, error, details, spec=None, guide_name=None) 
             code = max(code, 1)
     violations = []
     if spec is not None and result is not None:
-        from guidefit.check import check_result
+        from guidefit.report.check import check_result
 
         violations = check_result(data, spec)
         if violations:
@@ -638,8 +639,8 @@ def frf_cmd(recording, estimator, window_text, out_path, fft_precision):
     for w in warnings:
         click.echo(f"guidefit: warning: {w}", err=True)
     if out_path:
-        from guidefit.frf_io import write_frfs
         from guidefit.io.frf_files import read_metadata
+        from guidefit.io.registry import write_frfs
 
         # written whole by the registry's writer (guidefit.outputs), never onto the input (_refuse above)
         write_frfs(out_path, frfsets, recording=read_metadata(recording))  # a recording's or FRF file's runs
@@ -789,7 +790,7 @@ def correlate_cmd(fe_path, test_path, point_map, as_json, plot_path, checks, ban
     """
     import json
 
-    from guidefit import correlate as corr
+    from guidefit.machine import correlate as corr
 
     _plot_file(plot_path)
     _refuse([plot_path], [fe_path, test_path, point_map])
@@ -836,8 +837,8 @@ def update_cmd(deck, measured, params, point_map, freq_std, units, jobs, ccx, ma
     import json
     from pathlib import Path
 
-    from guidefit import update as upd
-    from guidefit.ccx_deck import find_ccx, load_deck
+    from guidefit.machine import update as upd
+    from guidefit.machine.ccx_deck import find_ccx, load_deck
     from guidefit.outputs import write_text
     from guidefit.progress import progress_bar
 
@@ -885,8 +886,8 @@ def report_cmd(recording, out_path, guide_name, candidates, estimator, no_jackkn
     RECORDING is a recording (.h5, .csv, .uff, frf.h5) or a test setup (.toml) of your own DAQ
     files (docs/recordings.md, "Your own DAQ files: quick start").
     """
-    from guidefit.html_report import write_report
     from guidefit.progress import progress_bar
+    from guidefit.report.html import write_report
 
     _refuse([out_path], [recording, _guide_file(guide_name)])
     settings = _identify_settings(estimator, no_jackknife, fft_precision)

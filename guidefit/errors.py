@@ -19,13 +19,13 @@ class                    home                         bases                     
 ``RecordingError``       ``guidefit.errors``          ``ValueError``              2
 ``ModelError``           ``guidefit.errors``          ``ValueError``              2
 ``IdentificationError``  ``guidefit.errors``          ``RuntimeError``            1
-``CheckSpecError``       ``guidefit.check``           ``GuideError``              2
+``CheckSpecError``       ``guidefit.report.check``           ``GuideError``              2
 ``HitSettingsError``     ``guidefit.hits``            ``ValueError``              2
 ``OutputError``          ``guidefit.outputs``         ``ValueError``              2
 ``ExportError``          ``guidefit.export.core``     ``ValueError``              2
-``DeckError``            ``guidefit.ccx_deck``        ``ValueError``              2
-``UpdateError``          ``guidefit.update``          ``DeckError``               2
-``CorrelateError``       ``guidefit.correlate``       ``ValueError``              2
+``DeckError``            ``guidefit.machine.ccx_deck``        ``ValueError``              2
+``UpdateError``          ``guidefit.machine.update``          ``DeckError``               2
+``CorrelateError``       ``guidefit.machine.correlate``       ``ValueError``              2
 ``SetupError``           ``guidefit.io.setup``        ``RecordingError``          2
 ``FEResultError``        ``guidefit.io.fe_results``   ``ValueError``              2
 =======================  ===========================  ==========================  ====

@@ -13,7 +13,7 @@ record (layout ``signals``). :func:`iter_hits` turns both into a stream of
   record is read.
 
 The file stays open for the whole iteration
-(:func:`guidefit.recording.open_reader`). For ``hits``, the force of every
+(:func:`guidefit.io.open_reader`). For ``hits``, the force of every
 stored hit is read first (for the run's median peak, used by ``too_weak``) in
 blocks of at most 8 MB, or the whole run is read once if it is that small.
 
@@ -423,7 +423,7 @@ def check_hit(
     run : Run
         Gives the channel names, the force column and the sample rate.
     data : ndarray, shape (n_samples, n_channels)
-        float64 SI samples, as from :func:`guidefit.recording.read_hit`.
+        float64 SI samples, as from :func:`guidefit.io.read_hit`.
     settings : HitSettings, optional
     index, start_sample : int
         Copied into the Hit.
@@ -480,7 +480,7 @@ def _check_raw(
     samples are float32 and need no scaling (the same values), else float64. An accepted hit keeps
     them (its ``data`` is their transpose, made if asked for). ``scale`` is
     ``run.scale_to_si``, or None when every factor is 1; the values are those
-    of :func:`guidefit.recording.read_hit`.
+    of :func:`guidefit.io.read_hit`.
     """
     extremes = _rows_from_raw(rows, raw, scale)
     codes, reasons, peak, trigger, metrics = _assess_rows(
@@ -504,7 +504,7 @@ def iter_hits(
     Parameters
     ----------
     run : Run
-        From :func:`guidefit.recording.read_recording`.
+        From :func:`guidefit.io.read_recording`.
     settings : HitSettings, optional
     chunk_samples : int
         Force samples read per step when scanning a ``signals`` run.
@@ -525,7 +525,7 @@ def iter_hits(
     --------
     >>> import os, tempfile
     >>> import numpy as np
-    >>> from guidefit.recording import RunData, read_recording, write_recording
+    >>> from guidefit.io import RunData, read_recording, write_recording
     >>> fs = 200_000.0
     >>> t = np.arange(4000) / fs
     >>> force = np.where(t < 1e-4, 100 * np.sin(np.pi * t / 1e-4), 0.0)

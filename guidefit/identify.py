@@ -10,9 +10,9 @@ values and return values, warnings inside their results:
 2. modal fit, shapes and labels (:func:`modal_fit`): one modal model of all
    runs (:func:`guidefit.modal_stage.identify_frfs`: poly-reference LSCF
    stabilisation diagram, pole selection by stability, global
-   variable-projection fit with shared poles, :mod:`guidefit.globalfit`),
+   variable-projection fit with shared poles, :mod:`guidefit.modes.globalfit`),
    each mode's modal constants of every run assembled into one rigid-body
-   motion of the carriage and labelled (:mod:`guidefit.labels`); ambiguous
+   motion of the carriage and labelled (:mod:`guidefit.modes.labels`); ambiguous
    labels are reported, not assigned; every run's own estimate is kept
    (``estimates``). Declared refit: harder force levels whose modes move
    are fitted apart.
@@ -64,7 +64,7 @@ from guidefit.identify_runs import (
     frf_channels,
 )
 from guidefit.model.vibration import JOINT_LABELS, UNNAMED_LABELS  # noqa: F401 - guidefit.identify.UNNAMED_LABELS
-from guidefit.modeshapes import IdentifiedMode  # noqa: F401 - guidefit.identify.IdentifiedMode
+from guidefit.modes.shapes import IdentifiedMode  # noqa: F401 - guidefit.identify.IdentifiedMode
 
 # --------------------------------------------------------------------------- Eq. (24)-(29)
 
@@ -128,7 +128,7 @@ class IdentifySettings:
     force_levels: bool = False  # per force-level frequencies (for explain's amplitude_dependence)
     force_bins: int = 3
     min_force_ratio: float = 1.5
-    method: str = "global"  # one modal model of all runs (guidefit.globalfit); the only method
+    method: str = "global"  # one modal model of all runs (guidefit.modes.globalfit); the only method
 
     def __post_init__(self):
         if self.method == "per_run":
@@ -147,7 +147,7 @@ class RunResult:
     hits: list
     modes: list
     excitation_direction: tuple
-    channels: list  # guidefit.recording.Channel of the responses, in FRF order
+    channels: list  # guidefit.io.Channel of the responses, in FRF order
     force_levels: list = field(default_factory=list)
 
 
@@ -464,7 +464,7 @@ class RunChannels:
     columns left out (:meth:`hits`). How a sensor-fault correction computes a run's FRFs again without
     a channel that reads another axis (:func:`corrected_frfs`)."""
 
-    run: object  # guidefit.recording.Run
+    run: object  # guidefit.io.Run
     keep: tuple  # column indices kept, in order; the force column among them
 
     @classmethod

@@ -24,9 +24,10 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from guidefit.errors import IdentificationError
-from guidefit.labels import sensor_matrix
+from guidefit.frf.windows import undo_window_damping
 from guidefit.model.vibration import JOINT_LABELS, UNNAMED_LABELS
-from guidefit.modeshapes import (
+from guidefit.modes.labels import sensor_matrix
+from guidefit.modes.shapes import (
     IdentifiedMode,
     _coherence_at,
     _half_power_entry,
@@ -34,7 +35,6 @@ from guidefit.modeshapes import (
     real_shape,
     rigid_body_motion,
 )
-from guidefit.windows import undo_window_damping
 
 
 @dataclass(frozen=True)
@@ -102,7 +102,7 @@ def _narrow_band(mode) -> tuple[float, float]:
 
 def _refit_one(frf, mode, max_nfev: int = 20, uncertainty: bool = True):
     """Refit one mode in its narrow band, starting from ``mode`` (None when the fit fails)."""
-    from guidefit import curvefit
+    from guidefit.modes import curvefit
 
     try:
         return curvefit.fit_modes(frf.frequency_hz, frf.H, _narrow_band(mode), 1, initial=[mode],
@@ -147,8 +147,8 @@ def _refit_in_band(frf, mode, run_fits, max_nfev: int = 40):
     """
     import warnings as _w
 
-    from guidefit import curvefit
     from guidefit import modes as modes_mod
+    from guidefit.modes import curvefit
 
     lo, hi = _narrow_band(mode)
     f = frf.frequency_hz
@@ -273,9 +273,9 @@ MIN_BINS_IN_BAND = 8  # fewer FRF bins than this in the search band: no mode fit
 def _fit_run(run, frf, guide, model, settings) -> tuple[list[IdentifiedMode], list[str]]:
     """One run's modes by per-run curve fits in the search band, labelled from that run alone, and the
     warnings of the fit (band, resolution, :class:`guidefit.modes.ModeFitWarning`)."""
-    from guidefit import curvefit
     from guidefit import modes as modes_mod
     from guidefit.model import vibration as vib
+    from guidefit.modes import curvefit
 
     warnings: list[str] = []
     band = _search_band(model, run, settings)
@@ -320,7 +320,7 @@ def _fit_run(run, frf, guide, model, settings) -> tuple[list[IdentifiedMode], li
             "f_std": f_std, "z_std": z_std,
         })
     candidates = _significant(candidates)
-    from guidefit import labels as lab_mod
+    from guidefit.modes import labels as lab_mod
 
     view = {run.name: lab_mod.RunView(frf_channels(run, frf), tuple(run.excitation_direction),
                                       None if run.excitation_position_m is None

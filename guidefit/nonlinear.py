@@ -127,7 +127,7 @@ class LevelSetup:
     hit_position_m: tuple
     hit_direction: tuple
     pulse_s: float
-    window: object  # guidefit.frf.WindowSettings of the level's FRF (guidefit.windows.window_settings_of)
+    window: object  # guidefit.frf.WindowSettings of the level's FRF (guidefit.frf.windows.window_settings_of)
     estimator: str = "H1"
 
 
@@ -169,7 +169,7 @@ def apparent_mode(frequency_hz, H, band_hz, initial=None) -> ModeFit:
     residual terms for the modes outside the band, the bins' weights rising
     linearly over :data:`EDGE_BINS` bins at the band's ends); the pole of
     the FRF as given (:func:`level_estimate` removes the FrfSet's exponential
-    window's damping, :func:`guidefit.windows.undo_window_damping`, as identify
+    window's damping, :func:`guidefit.frf.windows.undo_window_damping`, as identify
     does). ``initial``: (frequency_hz, zeta) to start the fit from (default
     the band's peaks). The same function estimates the measured and the
     simulated levels.
@@ -178,7 +178,7 @@ def apparent_mode(frequency_hz, H, band_hz, initial=None) -> ModeFit:
     """
     import warnings
 
-    from guidefit import curvefit
+    from guidefit.modes import curvefit
 
     f = np.asarray(frequency_hz, float)
     H = np.asarray(H)
@@ -261,7 +261,7 @@ def level_estimate(frf, mode_hz: float, damping_ratio: float, weights=None, jack
     f_c = peak_centroid(frf.frequency_hz, frf.H, mode_hz, weights)
     half = max(BAND_ZETAS * damping_ratio, BAND_MIN) * f_c
     band = (f_c - half, f_c + half)
-    from guidefit.windows import undo_window_damping
+    from guidefit.frf.windows import undo_window_damping
 
     try:
         pole = apparent_mode(frf.frequency_hz, frf.H, band, initial=(f_c, damping_ratio))
@@ -453,8 +453,8 @@ def _bin_frf(run, rr, wanted: set, whole: bool):
     """FRF of a bin's hits with the run's windows (the run's own FRF when the bin is the run) and
     the bin's pulse duration and (record length, pretrigger) in samples."""
     from guidefit import frf as frf_mod
+    from guidefit.frf.windows import window_settings_of
     from guidefit.hits import HitSettings, iter_hits
-    from guidefit.windows import window_settings_of
 
     frf = rr.frf
     pulses, hits, shape = [], [], (0, 0)
@@ -518,7 +518,7 @@ def measure_levels(identification, labels=("vertical",), force_bins: int = 3, no
 
 
 def _measure_mode(bins, mode, notes: list) -> list:
-    from guidefit.windows import window_settings_of
+    from guidefit.frf.windows import window_settings_of
 
     names = [ch.name for ch in bins[0][1].channels]
     weights = np.array([abs(mode.shape.get(n, 0.0)) for n in names]) ** 2
@@ -572,7 +572,7 @@ def simulate_force_levels(guide="MRB35", effects=(), forces_n=(100.0, 1000.0, 50
     """
     from dataclasses import replace
 
-    from guidefit.recording import RecordingData
+    from guidefit.io import RecordingData
     from guidefit.simulate import DEFAULT_RUNS, SimulationConfig, simulate
 
     base = {r.name: r for r in DEFAULT_RUNS}

@@ -2,7 +2,7 @@
 
 For a layout (a test setup, a recording's geometry, or a ``--sensors`` layout
 with ``--hit`` points) :func:`make_plan` reports, from
-:func:`guidefit.labels.layout_view` (the labeller's own computation, not a
+:func:`guidefit.modes.labels.layout_view` (the labeller's own computation, not a
 copy of it):
 
 * per run, how strongly its hit excites each model mode (``|g . phi|``, the
@@ -29,12 +29,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from guidefit import labels as lab_mod
+from guidefit.modes import labels as lab_mod
 
 
 @dataclass(frozen=True)
 class PlanRun:
-    """A planned run: its accelerometers (guidefit.labels.Sensor) and its hit."""
+    """A planned run: its accelerometers (guidefit.modes.labels.Sensor) and its hit."""
 
     name: str
     sensors: tuple
@@ -119,9 +119,9 @@ def shape_score(view: lab_mod.LayoutView) -> tuple:
 
 
 def layout_runs(guide, layout: str = "default", hits: dict | None = None, run_names=None) -> list[PlanRun]:
-    """PlanRuns of a ``--sensors`` layout (:func:`guidefit.layouts.resolve_layout`) on the simulator's
+    """PlanRuns of a ``--sensors`` layout (:func:`guidefit.simulate.layouts.resolve_layout`) on the simulator's
     default runs, hit points moved by ``hits`` (run -> (x, y, z))."""
-    from guidefit import layouts
+    from guidefit.simulate import layouts
 
     runs = [r for r in layouts.DEFAULT_RUNS if run_names is None or r.name in run_names]
     if hits:
@@ -161,7 +161,7 @@ def recording_runs(recording) -> list[PlanRun]:
     return out
 
 
-#: layouts tried by :func:`best_layout` (guidefit.layouts names)
+#: layouts tried by :func:`best_layout` (guidefit.simulate.layouts names)
 SEARCH_LAYOUTS = ("default", "pair", "side", "both", "triax:A,C")
 
 
@@ -232,7 +232,7 @@ def plan(source=None, guide=None, layout: str | None = None, hits: dict | None =
     guide : str, Path or Guide, optional
         Default: the one the source names, else MRB35.
     layout : str, optional
-        A :mod:`guidefit.layouts` layout (``default``, ``both``, ``triax:A,C``,
+        A :mod:`guidefit.simulate.layouts` layout (``default``, ``both``, ``triax:A,C``,
         ``side``, ``pair``, ``single`` or a TOML file); not with ``source``.
     hits : dict, optional
         run -> hit point (m) moved from the default (``--hit``).

@@ -12,7 +12,7 @@ import h5py
 import numpy as np
 import pytest
 
-from guidefit.recording import write_recording
+from guidefit.io import write_recording
 from guidefit.simulate import DEFAULT_RUNS, SimulationConfig, simulate
 
 FS = 200_000.0

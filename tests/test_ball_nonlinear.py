@@ -92,7 +92,7 @@ def ball_levels(ball, tmp_path_factory):
     """Three runs of the vertical hit at 300, 1500 and 4000 N on the 0.6 kg four-row carriage (preload
     6.6 um, nominal), identified; accelerometer range 4 m/s^2 per N so that nothing clips."""
     from guidefit.identify import IdentifySettings, identify
-    from guidefit.recording import write_recording
+    from guidefit.io import write_recording
 
     path = tmp_path_factory.mktemp("ball_levels") / "levels.h5"
     data, _ = nonlinear.simulate_force_levels(ball, ["amplitude_dependence:preload_factor=1"], (300.0, 1500.0, 4000.0),

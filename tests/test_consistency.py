@@ -21,8 +21,8 @@ from click.testing import CliRunner
 from guidefit import consistency as cons
 from guidefit.cli import main
 from guidefit.identify import IdentifySettings, identify
-from guidefit.labels import driving_row
-from guidefit.recording import RecordingData, RunData, write_recording
+from guidefit.io import RecordingData, RunData, write_recording
+from guidefit.modes.labels import driving_row
 from guidefit.simulate import SimulationConfig, simulate
 
 REAL = Path(__file__).parents[1].parent / "shared" / "real-data" / "pyfrf-impact"
@@ -81,8 +81,8 @@ def _accurate(result, truth):
 
 def _rigid_sets(shapes_by_run, seed=0):
     """ShapeSets of rigid motions at A-D (x, y) for unit tests of the fault search."""
-    from guidefit.labels import sensor_matrix
-    from guidefit.recording import Channel
+    from guidefit.io import Channel
+    from guidefit.modes.labels import sensor_matrix
 
     chans = [Channel(f"acc_{p}_{a}", "m/s^2", np.array(POINTS[p]), np.eye(3)[{"x": 0, "y": 1}[a]], 1.0)
              for p in "ABCD" for a in "xy"]

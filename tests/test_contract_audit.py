@@ -466,7 +466,7 @@ def test_heavy_vertical_base_splits_the_vertical_mode_independent_data(tmp_path)
 ])
 def test_invalid_check_spec_is_bad_input(tmp_path, toml, message):
     """Was: a typo'd name failed every file ("K_v not identified", exit 1); NaN limits passed anything."""
-    from guidefit.check import CheckSpecError, parse_spec
+    from guidefit.report.check import CheckSpecError, parse_spec
 
     spec = tmp_path / "spec.toml"
     spec.write_text(toml)

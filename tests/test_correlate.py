@@ -11,8 +11,8 @@ import pytest
 from click.testing import CliRunner
 
 from guidefit.cli import main
-from guidefit.correlate import correlate, eq34_error_pct, mac
 from guidefit.io.fe_results import FEModes, read_f06, read_fe
+from guidefit.machine.correlate import correlate, eq34_error_pct, mac
 from guidefit.model import vibration as vib
 from guidefit.model.guides import load_guide
 

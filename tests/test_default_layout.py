@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from guidefit.identify import IdentifySettings, identify
-from guidefit.recording import RecordingData, RunData, write_recording
+from guidefit.io import RecordingData, RunData, write_recording
 from guidefit.simulate import SimulationConfig, simulate
 
 FAST = IdentifySettings(jackknife=False)
@@ -117,8 +117,8 @@ def test_force_levels_on_one_axis_are_explained_by_amplitude_dependence(tmp_path
 def _plate(freqs_hz, seed=0, n=4000, fs=200_000.0, hits=3):
     """A structure whose modes are no rigid motion of anything (each sensor its own random modal amplitude),
     recorded the paper's way: y at A-D in the vertical run, x at A-D in the lateral run."""
-    from guidefit.layouts import DEFAULT_RUNS, resolve_layout
     from guidefit.model.guides import load_guide
+    from guidefit.simulate.layouts import DEFAULT_RUNS, resolve_layout
 
     rng = np.random.default_rng(seed)
     sensors = resolve_layout(load_guide("MRB35"), "default", DEFAULT_RUNS)

@@ -33,7 +33,7 @@ def _builtin_bases(cls: type) -> list[type]:
 
 def test_every_exception_class_is_a_guidefit_error_and_a_builtin():
     classes = _exception_classes()
-    assert "guidefit.update.UpdateError" in classes and "guidefit.io.setup.SetupError" in classes
+    assert "guidefit.machine.update.UpdateError" in classes and "guidefit.io.setup.SetupError" in classes
     for name, cls in classes.items():
         assert issubclass(cls, GuidefitError), name
         if cls is not GuidefitError:

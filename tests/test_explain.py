@@ -463,7 +463,7 @@ def test_an_identification_and_its_json_give_the_same_explanation(tmp_path, monk
         raise AssertionError("explain read the recording again")
 
     monkeypatch.setattr("guidefit.io.registry.read_recording", no_second_read)
-    monkeypatch.setattr("guidefit.recording.read_recording", no_second_read)
+    monkeypatch.setattr("guidefit.io.read_recording", no_second_read)
     candidates = ["contact_stiffness", "added_mass", "amplitude_dependence"]
     direct = explain_identification(ident, candidates=candidates).to_dict()
     from_json = explain(results, candidates=candidates).to_dict()

@@ -444,7 +444,7 @@ def test_threads_and_hit_rows_give_the_same_bits(tmp_path):
     rows) equals frf_from_records over the plainly read records, bit for bit,
     for any number of workers: the sums are added in hit order."""
     from guidefit.hits import iter_hits
-    from guidefit.recording import RunData, read_hit, read_recording, write_recording
+    from guidefit.io import RunData, read_hit, read_recording, write_recording
 
     rng = np.random.default_rng(21)
     fs, n, hits = 20_000.0, 3000, 11
@@ -485,7 +485,7 @@ def test_max_frequency_keeps_the_first_bins_unchanged(tmp_path):
     the same FFT, the same windows, the same sums bin by bin (to rounding)."""
     from guidefit.frf import kept_bins
     from guidefit.hits import iter_hits
-    from guidefit.recording import RunData, read_recording, write_recording
+    from guidefit.io import RunData, read_recording, write_recording
 
     rng = np.random.default_rng(5)
     fs, n, hits = 20_000.0, 4000, 9
@@ -788,7 +788,7 @@ def test_large_runs_put_two_consecutive_hits_in_each_group(tmp_path):
     result is the same for any number of threads."""
     from guidefit.frf import PAIR_HITS_PER_GROUP, WindowSettings
     from guidefit.hits import iter_hits
-    from guidefit.recording import RunData, read_hit, read_recording, write_recording
+    from guidefit.io import RunData, read_hit, read_recording, write_recording
 
     rng = np.random.default_rng(8)
     fs, n, G = 20_000.0, 512, 8

@@ -44,15 +44,15 @@ DATASETS = [("frequency_hz", "reverse"), ("frequency_hz", "nan"), ("frequency_hz
 def frf_file(tmp_path_factory):
     from guidefit.frf import compute_frf
     from guidefit.hits import iter_hits
+    from guidefit.io import write_recording
     from guidefit.io.frf_files import write_frf_h5_file
-    from guidefit.recording import write_recording
     from guidefit.simulate import SimulationConfig, simulate
 
     folder = tmp_path_factory.mktemp("frf_props")
     data, _ = simulate("MRB35", config=SimulationConfig(hits=3, record_s=0.02, sensor_layout="default"), seed=2)
     rec = folder / "rec.h5"
     write_recording(rec, data)
-    from guidefit.recording import read_recording
+    from guidefit.io import read_recording
 
     recording = read_recording(rec)
     frfs = [compute_frf(run, iter_hits(run)) for run in recording.runs]

@@ -113,7 +113,7 @@ def test_identify_json_says_no_hits_were_checked(case):
 
 
 def test_checks_that_need_hits_or_coherence_are_not_passed_vacuously(case, tmp_path):
-    from guidefit.check import check_result, parse_spec
+    from guidefit.report.check import check_result, parse_spec
 
     spec = parse_spec({"quality": {"max_rejected_hits": 0, "min_coherence": 0.5}}, "spec")
     assert check_result(case["ident"].to_dict(), spec) == []
@@ -149,7 +149,7 @@ def test_frf_command_converts_frf_h5_to_uff(case, tmp_path):
 
 
 def test_explain_and_report_start_from_the_frf_file(case, tmp_path):
-    from guidefit.html_report import _header, _hits, report_results
+    from guidefit.report.html import _header, _hits, report_results
 
     # what explain and the report start from (identify_for_explain): no force levels without hits
     res = report_results(case["frf_uff"], candidates=["added_mass"])

@@ -42,7 +42,7 @@ import pytest
 
 from guidefit.frf import PRECISIONS, fft_dtype, frf_from_records
 from guidefit.identify import IdentifySettings, frf_of_recording, identify
-from guidefit.recording import RecordingData, write_recording
+from guidefit.io import RecordingData, write_recording
 from guidefit.simulate import SimulationConfig, simulate
 
 CONFIG = replace(SimulationConfig(), hits=4, record_s=0.05)

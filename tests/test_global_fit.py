@@ -1,4 +1,4 @@
-"""One modal model for the whole test (issue 13): guidefit.globalfit and guidefit.modal_stage.
+"""One modal model for the whole test (issue 13): guidefit.modes.globalfit and guidefit.modal_stage.
 
 Truth comes from two places: synthetic pole-residue FRFs written down here
 (poles, residues, noise, window shift all known), and seeded
@@ -18,8 +18,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from guidefit import globalfit, modal_stage
+from guidefit import modal_stage
 from guidefit.identify import IdentifySettings, identify
+from guidefit.modes import globalfit
 
 CARRIAGE = ("yaw", "pitch", "roll_low", "vertical", "roll_high")
 
@@ -106,8 +107,8 @@ _CASES = {
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory):
     """Lazily simulated recordings: case -> (path, truth); 4 hits of 0.05 s per run, seed 1."""
+    from guidefit.io import write_recording
     from guidefit.model.effects import parse_effect
-    from guidefit.recording import write_recording
     from guidefit.simulate import SimulationConfig, simulate
 
     folder = tmp_path_factory.mktemp("global")
@@ -193,7 +194,7 @@ def test_runs_at_two_hit_forces_keep_their_own_estimates(recorded, tmp_path):
     run_modes), and the force bins within a run keep theirs (force_levels with damping)."""
     from dataclasses import replace
 
-    from guidefit.recording import RecordingData, write_recording
+    from guidefit.io import RecordingData, write_recording
 
     _, truth, soft = recorded("clean", force_n=(60.0, 120.0), hits=6)
     _, _, hard = recorded("clean", force_n=(400.0, 800.0), hits=6)
@@ -220,8 +221,8 @@ def test_runs_at_two_hit_forces_keep_their_own_estimates(recorded, tmp_path):
 def test_modal_stage_starts_from_frf_sets(recorded):
     """identify_frfs takes FRF sets and channel geometry (what an FRF file gives) and finds the same modes."""
     from guidefit.identify import run_frfs
+    from guidefit.io import read_recording
     from guidefit.model.guides import load_guide
-    from guidefit.recording import read_recording
 
     path, truth, _ = recorded("corner")
     settings = IdentifySettings(jackknife=False)

@@ -1,4 +1,4 @@
-"""The global fit's fast paths against the direct computations they replace (guidefit.globalvp, globalfit).
+"""The global fit's fast paths against the direct computations they replace (guidefit.modes.globalvp, globalfit).
 
 Each fast path is exact algebra, so it must agree with the direct form to
 rounding, amplified at most by the conditioning of the small problems here:
@@ -17,7 +17,7 @@ import math
 import numpy as np
 import pytest
 
-from guidefit import globalfit, globalvp
+from guidefit.modes import globalfit, globalvp
 
 MODES = [(1500.0, 0.02), (2600.0, 0.06)]
 
@@ -68,7 +68,7 @@ def test_explicit_projection_of_derivatives_near_the_design_span_gives_the_same_
 
 
 def test_design_is_the_fitcore_basis_stacked_and_normalised():
-    from guidefit import fitcore
+    from guidefit.modes import fitcore
 
     prob, wn, z = _problem()
     p = fitcore.poles(wn, z)
@@ -89,7 +89,7 @@ def test_compressed_problem_has_the_full_problems_normal_equations():
 
 
 def test_trust_region_fit_on_the_compressed_problem_ends_where_the_full_one_does():
-    """The fit (guidefit.lsq on the normal equations) against scipy's trf on the full residual and
+    """The fit (guidefit.modes.lsq on the normal equations) against scipy's trf on the full residual and
     Jacobian (the first implementation): the same optimum to far below the fit's own std."""
     import scipy.optimize
 

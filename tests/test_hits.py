@@ -21,7 +21,7 @@ from guidefit.hits import (
     iter_hits,
     summarise_hits,
 )
-from guidefit.recording import (
+from guidefit.io import (
     RunData,
     RunReader,
     read_block,
@@ -857,7 +857,7 @@ def test_first_pass_over_half_the_force_judges_as_the_full_median(tmp_path, monk
     decisions, reasons, peaks and metrics must be those of the full two-pass
     reference, for weak hits early, late and first, a non-finite force, and
     median-fraction limits that make none, some or most hits too weak."""
-    from guidefit.recording import RunReader
+    from guidefit.io import RunReader
 
     rng = np.random.default_rng(17)
     n, hits = 3000, 12

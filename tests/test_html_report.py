@@ -14,8 +14,8 @@ from click.testing import CliRunner
 
 from guidefit import __version__
 from guidefit.cli import main
-from guidefit.html_report import loads_embedded
 from guidefit.report import fmt
+from guidefit.report.html import loads_embedded
 
 SAMPLE = Path(__file__).resolve().parents[1] / "sample_data" / "mrb35_sample.h5"
 CHROMIUM = Path("/usr/bin/chromium")

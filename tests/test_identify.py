@@ -119,9 +119,9 @@ def test_joint_parameter_std_propagation():
 def test_labels_of_the_papers_case_from_the_model_seen_through_the_sensors():
     """The paper's soft rig: roll_low 57 % below the model, roll_high 28 % below; a second mode with the
     vertical shape but a third of the carriage share is not the vertical mode."""
-    from guidefit import labels
     from guidefit.model import vibration as vib
     from guidefit.model.guides import load_guide
+    from guidefit.modes import labels
     from guidefit.plan import layout_runs
 
     guide = load_guide("MRB35")
@@ -246,7 +246,7 @@ def test_a_run_without_a_channel_gives_the_other_channels_frfs():
     FRFs of a run read without one channel are those of the whole run without its column."""
     from guidefit.frf import WindowSettings
     from guidefit.identify import RunChannels, _compute_frf
-    from guidefit.recording import read_recording
+    from guidefit.io import read_recording
 
     run = read_recording(SAMPLES / "mrb35_sample.h5").runs[0]
     settings = IdentifySettings(window=WindowSettings(none=True))
@@ -263,7 +263,7 @@ def test_a_run_without_a_channel_gives_the_other_channels_frfs():
 def test_stage_warnings_are_the_results_warnings(sample_result):
     """The pipeline's stages carry their warnings: the FRF stage's come first in the result's."""
     from guidefit.identify import frf_stage, frf_top_hz, guide_and_model
-    from guidefit.recording import read_recording
+    from guidefit.io import read_recording
 
     rec = read_recording(SAMPLES / "mrb35_sample.h5")
     settings = IdentifySettings(min_accepted_hits=10_000)  # every run warns: too few accepted hits

@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 from guidefit.errors import GuidefitError
 from guidefit.hits import iter_hits
 from guidefit.identify import IdentifySettings, identify
-from guidefit.recording import read_recording
+from guidefit.io import read_recording
 
 SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
 FS = 200_000.0
@@ -92,7 +92,7 @@ def test_any_attribute_value_gives_own_error(where, value):
 
 @contextlib.contextmanager
 def _hdf5_timeout(seconds):
-    """Give the HDF5 library ``seconds`` to read a file's metadata (guidefit.recording)."""
+    """Give the HDF5 library ``seconds`` to read a file's metadata (guidefit.io)."""
     old = os.environ.get("GUIDEFIT_HDF5_TIMEOUT_S")
     os.environ["GUIDEFIT_HDF5_TIMEOUT_S"] = str(seconds)
     try:

@@ -102,12 +102,12 @@ def test_no_import_cycle_in_guidefit():
 
 #: The numerics of guidefit: signal processing, modal fitting, identification, the physical model.
 NUMERICS = (
-    "guidefit.frf", "guidefit.spectra", "guidefit.windows", "guidefit.hits", "guidefit.hit_checks",
-    "guidefit.prominence", "guidefit.modes", "guidefit.modal_base", "guidefit.curvefit", "guidefit.halfpower",
-    "guidefit.lsq", "guidefit.globalfit", "guidefit.globalvp", "guidefit.modal_stage", "guidefit.modeshapes",
-    "guidefit.labels", "guidefit.consistency", "guidefit.identify", "guidefit.identify_runs",
-    "guidefit.nonlinear", "guidefit.explain", "guidefit.simulate", "guidefit.sim_physics", "guidefit.predict",
-    "guidefit.update", "guidefit.correlate", "guidefit.model.static", "guidefit.model.vibration",
+    "guidefit.frf", "guidefit.frf.spectra", "guidefit.frf.windows", "guidefit.hits", "guidefit.hit_checks",
+    "guidefit.modes.prominence", "guidefit.modes", "guidefit.modes.base", "guidefit.modes.curvefit", "guidefit.modes.halfpower",
+    "guidefit.modes.lsq", "guidefit.modes.globalfit", "guidefit.modes.globalvp", "guidefit.modal_stage", "guidefit.modes.shapes",
+    "guidefit.modes.labels", "guidefit.consistency", "guidefit.identify", "guidefit.identify_runs",
+    "guidefit.nonlinear", "guidefit.explain", "guidefit.simulate", "guidefit.simulate.physics", "guidefit.predict",
+    "guidefit.machine.update", "guidefit.machine.correlate", "guidefit.model.static", "guidefit.model.vibration",
     "guidefit.model.contact", "guidefit.model.effects",
 )
 #: What guidefit.io may import outside itself: errors and data types. ``model.guides`` is the
@@ -147,8 +147,9 @@ def test_frf_does_no_file_io():
     import guidefit.frf
     import guidefit.io.frf_files
 
-    text = (PACKAGE / "frf.py").read_text(encoding="utf-8")
-    assert "h5py" not in text and "open(" not in text
+    for path in (PACKAGE / "frf").glob("*.py"):
+        text = path.read_text(encoding="utf-8")
+        assert "h5py" not in text and "open(" not in text, path.name
     for name in ("read_frf_h5", "write_frf_csv", "write_frf_h5"):  # documented names of the old home
         assert getattr(guidefit.frf, name) is getattr(guidefit.io.frf_files, name)
 
@@ -185,7 +186,7 @@ def test_each_io_module_imports_alone():
     """Each module of guidefit.io (and the compatibility modules) imports first in a
     fresh interpreter, and none pulls in h5py, pandas or scipy on import."""
     names = sorted(m for m in _modules() if m.startswith("guidefit.io"))
-    names += ["guidefit.recording", "guidefit.uff", "guidefit.frf_io"]
+    names += ["guidefit.io", "guidefit.io.uff", "guidefit.io.registry"]
     code = (
         "import importlib, subprocess, sys\n"
         "for name in sys.argv[1:]:\n"
@@ -225,17 +226,15 @@ def test_registry_dispatches_by_suffix_and_names_the_choices():
 
 
 def test_compatibility_modules_keep_every_public_name():
-    import guidefit.frf_io
     import guidefit.io
+    import guidefit.io.registry
     import guidefit.io.uff
-    import guidefit.recording
-    import guidefit.uff
 
-    for name in guidefit.recording.__all__:
-        assert getattr(guidefit.recording, name) is getattr(guidefit.io, name)
+    for name in guidefit.io.__all__:
+        assert getattr(guidefit.io, name) is getattr(guidefit.io, name)
     for name in guidefit.io.uff.__all__:
-        assert getattr(guidefit.uff, name) is getattr(guidefit.io.uff, name)
-    assert guidefit.frf_io.write_frfs is guidefit.io.write_frfs
+        assert getattr(guidefit.io.uff, name) is getattr(guidefit.io.uff, name)
+    assert guidefit.io.registry.write_frfs is guidefit.io.write_frfs
     assert guidefit.read_recording is guidefit.io.read_recording
 
 
@@ -291,13 +290,8 @@ def test_a_source_with_read_and_dtype_only_works_everywhere(tmp_path):
 
 #: the longest a function may be (lines from ``def`` to its end, docstring included) without a reason
 MAX_FUNCTION_LINES = 100
-#: modules held to MAX_FUNCTION_LINES (issue 22: the fitting core, peaks, half-power, spectra, hit checks,
-#: static contact and the long readers and writers of io); the rest of the package joins when it is split
-LENGTH_CHECKED = (
-    "guidefit.curvefit", "guidefit.fitcore", "guidefit.globalfit", "guidefit.globalvp", "guidefit.halfpower",
-    "guidefit.hit_checks", "guidefit.lsq", "guidefit.modal_base", "guidefit.modes", "guidefit.prominence",
-    "guidefit.spectra", "guidefit.model.static", "guidefit.io.csv", "guidefit.io.hdf5", "guidefit.io.uff_write",
-)
+#: the longest a module may be (lines) without a reason (a comment ``# long because: ...`` in its first 30 lines)
+MAX_MODULE_LINES = 1000
 
 
 def _long_functions(source: str, limit: int = MAX_FUNCTION_LINES) -> list[tuple[str, int, bool]]:
@@ -324,10 +318,20 @@ def _long_functions(source: str, limit: int = MAX_FUNCTION_LINES) -> list[tuple[
 
 
 def test_no_function_over_100_lines_without_a_reason():
+    """Every function of guidefit (issue 22)."""
     mods = _modules()
-    found = {mod: _long_functions(mods[mod].read_text(encoding="utf-8")) for mod in LENGTH_CHECKED}
+    found = {mod: _long_functions(mods[mod].read_text(encoding="utf-8")) for mod in mods}
     unexplained = [f"{mod}.{name} ({n} lines)" for mod, funcs in found.items() for name, n, why in funcs if not why]
     assert not unexplained, "functions over 100 lines without a '# long because:' comment: " + ", ".join(unexplained)
+
+
+def test_no_module_over_1000_lines_without_a_reason():
+    long = []
+    for mod, path in _modules().items():
+        lines = path.read_text(encoding="utf-8").splitlines()
+        if len(lines) > MAX_MODULE_LINES and not any(x.strip().startswith("# long because:") for x in lines[:30]):
+            long.append(f"{mod} ({len(lines)} lines)")
+    assert not long, "modules over 1000 lines without a '# long because:' comment: " + ", ".join(long)
 
 
 def test_the_length_check_finds_a_long_function_and_reads_its_reason():
@@ -338,3 +342,52 @@ def test_the_length_check_finds_a_long_function_and_reads_its_reason():
     assert _long_functions(plain) == [("f", 102, False)]
     assert _long_functions(reasoned) == [("g", 103, True)]
     assert _long_functions(short) == []
+
+
+#: The layers of guidefit, bottom to top (issue 22). A module may import its own layer and the layers
+#: below it, never a layer above: the flow recording -> hits -> FRFs -> modes -> parameters ->
+#: residuals -> report, with the model beside it (below everything that compares with it).
+LAYERS = (
+    ("core", ("guidefit", "guidefit._api", "guidefit.errors", "guidefit.jsonio", "guidefit.progress",
+              "guidefit.workers", "guidefit.frfset")),
+    ("model", ("guidefit.model",)),
+    ("io", ("guidefit.io", "guidefit.outputs")),
+    ("signal", ("guidefit.hits", "guidefit.hit_checks", "guidefit.frf")),
+    ("modes", ("guidefit.modes",)),
+    ("simulate", ("guidefit.simulate",)),
+    ("identify", ("guidefit.identify", "guidefit.identify_runs", "guidefit.modal_stage", "guidefit.consistency",
+                  "guidefit.plan", "guidefit.predict")),
+    ("explain", ("guidefit.nonlinear", "guidefit.explain")),
+    ("products", ("guidefit.report", "guidefit.export", "guidefit.machine")),
+    ("command", ("guidefit.cli", "guidefit.__main__")),
+)
+#: Imports that go up a layer, each with its reason.
+UPWARD_ALLOWED = {
+    ("guidefit.model.effects.amplitude_dependence", "guidefit.nonlinear"):
+        "the effect's forward model of force levels simulates hits through the measurement chain "
+        "(called only when explain measured levels)",
+}
+
+
+def _layer_of(module: str) -> int:
+    best, level = "", None
+    for k, (_, prefixes) in enumerate(LAYERS):
+        for p in prefixes:
+            if (module == p or module.startswith(p + ".")) and len(p) > len(best):
+                best, level = p, k
+    assert level is not None, f"{module} is in no layer of LAYERS"
+    return level
+
+
+def test_imports_go_down_the_layers():
+    """No import (module level or inside a function) reaches a layer above its module's."""
+    edges = _import_graph(_modules())
+    up = sorted((a, b) for a, targets in edges.items() for b in targets
+                if _layer_of(b) > _layer_of(a) and (a, b) not in UPWARD_ALLOWED)
+    assert up == [], "imports up the layers: " + ", ".join(f"{a} -> {b}" for a, b in up)
+    assert all(b in edges[a] for a, b in UPWARD_ALLOWED), "an allowed upward import that no longer exists"
+
+
+def test_the_layer_check_sees_an_upward_import():
+    assert _layer_of("guidefit.io.hdf5") < _layer_of("guidefit.frf.spectra") < _layer_of("guidefit.modes.labels")
+    assert _layer_of("guidefit.model.static") < _layer_of("guidefit.io") < _layer_of("guidefit.report.html")

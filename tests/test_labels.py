@@ -1,4 +1,4 @@
-"""guidefit.labels: the one labeller, on readings predicted by the model itself (truth by construction)."""
+"""guidefit.modes.labels: the one labeller, on readings predicted by the model itself (truth by construction)."""
 
 from __future__ import annotations
 
@@ -8,9 +8,9 @@ import math
 import numpy as np
 import pytest
 
-from guidefit import labels as L
 from guidefit.model import vibration as vib
 from guidefit.model.guides import load_guide
+from guidefit.modes import labels as L
 from guidefit.plan import layout_runs
 
 GUIDE = load_guide("MRB35")

@@ -19,8 +19,8 @@ import pytest
 
 from guidefit.explain import explain
 from guidefit.identify import IdentifySettings, identify
+from guidefit.io import write_recording
 from guidefit.model.effects import parse_effect
-from guidefit.recording import write_recording
 from guidefit.simulate import SimulationConfig, simulate
 
 LAYOUTS = ("default", "both", "side", "triax:A,C", "pair", "single")

@@ -1,4 +1,4 @@
-"""Sensor layouts and hit points (guidefit.layouts, ``guidefit simulate --sensors/--hit``).
+"""Sensor layouts and hit points (guidefit.simulate.layouts, ``guidefit simulate --sensors/--hit``).
 
 Expected channels are written down from the recording contract and the MRB35
 points of ``guidefit/model/data/MRB35.toml``: A (+0.030, 0, +0.045),
@@ -16,7 +16,9 @@ from click.testing import CliRunner
 
 from guidefit.cli import main
 from guidefit.errors import ModelError
-from guidefit.layouts import (
+from guidefit.model.guides import load_guide
+from guidefit.simulate import DEFAULT_RUNS, HammerRun, SimulationConfig, simulate, truth_path
+from guidefit.simulate.layouts import (
     SensorSpec,
     apply_hits,
     parse_hit,
@@ -25,8 +27,6 @@ from guidefit.layouts import (
     run_axis,
     side_points_m,
 )
-from guidefit.model.guides import load_guide
-from guidefit.simulate import DEFAULT_RUNS, HammerRun, SimulationConfig, simulate, truth_path
 
 MRB35 = load_guide("MRB35")
 A, B, C, D = (0.030, 0.0, 0.045), (-0.030, 0.0, 0.045), (-0.030, 0.0, -0.045), (0.030, 0.0, -0.045)
@@ -234,7 +234,7 @@ def _simulate_cli(tmp_path, *args):
     result = CliRunner().invoke(main, ["simulate", "--out", str(out), "--hits", "1", "--record-length", "0.002",
                                        "--ideal", *args])
     assert result.exit_code == 0, result.output
-    from guidefit.recording import read_recording
+    from guidefit.io import read_recording
 
     return read_recording(out), json.loads(truth_path(out).read_text())
 

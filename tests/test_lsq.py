@@ -1,11 +1,11 @@
-"""guidefit.lsq: the hand-written Levenberg-Marquardt lands where scipy's least_squares does."""
+"""guidefit.modes.lsq: the hand-written Levenberg-Marquardt lands where scipy's least_squares does."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from guidefit.lsq import from_residual, minimize
+from guidefit.modes.lsq import from_residual, minimize
 
 
 def _damped_sines(seed: int, n_modes: int):

@@ -508,7 +508,7 @@ def test_variable_projection_jacobian_matches_central_differences(per_channel_we
     # so check it directly. Central differences with h = 1e-6 in ln(w_n),
     # ln(zeta) are accurate to about h^2 times the third derivative, ~1e-8
     # relative here; the analytic one must agree to 1e-6.
-    from guidefit import curvefit, fitcore
+    from guidefit.modes import curvefit, fitcore
 
     rng = np.random.default_rng(4)
     f = np.arange(1500.0, 3000.0, 2.0)

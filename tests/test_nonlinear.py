@@ -25,7 +25,7 @@ def identification(tmp_path_factory):
     keep the test fast.
     """
     from guidefit.identify import IdentifySettings, identify
-    from guidefit.recording import write_recording
+    from guidefit.io import write_recording
 
     path = tmp_path_factory.mktemp("nonlinear") / "levels.h5"
     data, _ = simulate_force_levels("MRB35", ["amplitude_dependence:preload_factor=1"], (100.0, 1000.0, 5000.0),
@@ -115,7 +115,7 @@ def test_explain_names_amplitude_dependence(identification, levels, monkeypatch)
         raise AssertionError("explain read the recording again")
 
     monkeypatch.setattr("guidefit.io.registry.read_recording", no_second_read)
-    monkeypatch.setattr("guidefit.recording.read_recording", no_second_read)
+    monkeypatch.setattr("guidefit.io.read_recording", no_second_read)
 
     result = explain_identification(identification, candidates=["amplitude_dependence", "contact_stiffness",
                                                                  "support_compliance"])

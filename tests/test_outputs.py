@@ -183,9 +183,9 @@ def _half_then_fail(real, path_at=0):
 
 @pytest.mark.parametrize("command", ["frf", "identify-csv", "identify-junit", "export"])
 def test_a_writer_failing_midway_leaves_no_truncated_output(case, monkeypatch, command):
-    import guidefit.check
     import guidefit.outputs
     import guidefit.report
+    import guidefit.report.check
 
     folder = case.parent
     out = folder / {"frf": "frf.csv", "identify-csv": "rows.csv", "identify-junit": "j.xml",
@@ -202,7 +202,7 @@ def test_a_writer_failing_midway_leaves_no_truncated_output(case, monkeypatch, c
                             _half_then_fail(guidefit.report.write_summary_csv, path_at=1))
         args = ("identify", case, "--no-jackknife", "--csv", out)
     elif command == "identify-junit":
-        monkeypatch.setattr(guidefit.check, "junit_xml", _half_then_fail(guidefit.check.junit_xml, path_at=1))
+        monkeypatch.setattr(guidefit.report.check, "junit_xml", _half_then_fail(guidefit.report.check.junit_xml, path_at=1))
         args = ("identify", case, "--no-jackknife", "--junit", out)
     else:
         code, stdout, _ = _cli("identify", case, "--no-jackknife", "--json")

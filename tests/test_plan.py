@@ -10,8 +10,8 @@ import pytest
 from click.testing import CliRunner
 
 from guidefit.cli import main
-from guidefit.labels import layout_view
 from guidefit.model.guides import load_guide
+from guidefit.modes.labels import layout_view
 from guidefit.plan import layout_runs, make_plan, plan
 
 GUIDE = load_guide("MRB35")
@@ -61,7 +61,7 @@ def test_both_axes_decide_every_label_by_shape_and_the_search_finds_it():
 def test_plan_agrees_with_identify_on_a_simulated_recording(tmp_path):
     """The plan of a recording's geometry says what identify then reports for its labels."""
     from guidefit.identify import IdentifySettings, identify
-    from guidefit.recording import write_recording
+    from guidefit.io import write_recording
     from guidefit.simulate import SimulationConfig, simulate
 
     data, _ = simulate("MRB35", config=SimulationConfig(hits=3, record_s=0.03, sensor_layout="default"), seed=2)

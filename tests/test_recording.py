@@ -1,4 +1,4 @@
-"""Tests of guidefit.recording: the recording contract, read and write.
+"""Tests of guidefit.io: the recording contract, read and write.
 
 Bad files are written with h5py directly (or as text for CSV), each breaking
 one rule of ``shared/recording-format.md``; every one must give a one-line
@@ -16,7 +16,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from guidefit.errors import GuidefitError, RecordingError
-from guidefit.recording import (
+from guidefit.io import (
     STANDARD_GRAVITY,
     RecordingData,
     RunData,
@@ -986,7 +986,7 @@ def test_importing_reads_no_heavy_modules():
     import subprocess
     import sys
 
-    code = "import sys, guidefit.recording, guidefit.hits; print(sorted({'h5py', 'pandas', 'scipy'} & set(sys.modules)))"
+    code = "import sys, guidefit.io, guidefit.hits; print(sorted({'h5py', 'pandas', 'scipy'} & set(sys.modules)))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
 

@@ -163,7 +163,7 @@ def test_the_html_report_hashes_the_daq_files_a_setup_reads(folder):
     setup's own hash says nothing of the data."""
     import hashlib
 
-    from guidefit.html_report import _daq_rows
+    from guidefit.report.html import _daq_rows
 
     (folder / "test.toml").write_text(GOOD)
     rows = _daq_rows("test.toml")

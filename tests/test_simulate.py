@@ -373,7 +373,7 @@ def test_same_seed_same_recording_and_hits_do_not_depend_on_layout():
 def test_written_file_declares_only_what_the_experimenter_knew(tmp_path):
     import h5py
 
-    from guidefit.recording import read_recording
+    from guidefit.io import read_recording
 
     out = write_simulation(tmp_path / "rec.h5", MRB35, ["added_mass:mass_kg=0.05"],
                            SimulationConfig(hits=2, record_s=0.005), seed=3)
@@ -431,7 +431,7 @@ def test_regenerating_sample_data_reproduces_the_committed_files(tmp_path):
     from click.testing import CliRunner
 
     from guidefit.cli import main
-    from guidefit.recording import read_block, read_hit, read_recording
+    from guidefit.io import read_block, read_hit, read_recording
 
     commands = _readme_commands()
     assert len(commands) == 3
@@ -495,7 +495,7 @@ def test_cli_simulate_writes_files_and_reports_bad_input_in_one_line(tmp_path):
 
 
 def test_continuous_hdf5_is_streamed_and_equals_the_in_memory_recording(tmp_path):
-    from guidefit.recording import read_block, read_recording
+    from guidefit.io import read_block, read_recording
 
     cfg = SimulationConfig(hits=3, record_s=0.005, layout="signals", gap_s=0.002, faults=("double_hit",))
     data, truth = simulate(MRB35, (), cfg, seed=14)

@@ -13,7 +13,7 @@ import pytest
 
 from guidefit import modal_stage as ms
 from guidefit.identify import IdentifySettings, identify
-from guidefit.recording import Channel, write_recording
+from guidefit.io import Channel, write_recording
 from guidefit.simulate import SimulationConfig, simulate
 
 POINTS = {"A": (0.030, 0.0, 0.045), "B": (-0.030, 0.0, 0.045), "C": (-0.030, 0.0, -0.045),
@@ -34,7 +34,7 @@ def nominal():
 
 
 def _sensors(points, axes):
-    from guidefit.labels import sensor_matrix
+    from guidefit.modes.labels import sensor_matrix
 
     chans = [Channel(f"acc_{p}_{a}", "m/s^2", np.array(POINTS[p]), np.eye(3)["xyz".index(a)], 1.0)
              for p in points for a in axes]
@@ -76,7 +76,7 @@ def test_points_a_b_alone_resolve_the_motion_from_the_hit_point_residues(nominal
     sensors = {r: S for r in drive}
     q0, scale, observed = ms.assemble_motion(constants, sensors, drive, mass=mass)
     q, observed = ms._resolve_groups(q0, observed, scale, constants, sensors, drive, mass)
-    from guidefit.modeshapes import energy_shares
+    from guidefit.modes.shapes import energy_shares
 
     shares = energy_shares(q, mass)
     assert max(shares, key=shares.get) == group

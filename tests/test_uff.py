@@ -1,4 +1,4 @@
-"""Tests of guidefit.uff: UFF-58 FRF export, time-data export and import.
+"""Tests of guidefit.io.uff: UFF-58 FRF export, time-data export and import.
 
 Every file written here is read back with pyuff itself (not with our
 reader), so the fields are checked as any other UFF consumer sees them.
@@ -22,12 +22,12 @@ from click.testing import CliRunner
 
 from guidefit.errors import RecordingError
 from guidefit.frf import FrfSet
-from guidefit.recording import RecordingData, RunData, default_points, read_recording
-from guidefit.recording import write_recording as write_h5
+from guidefit.io import RecordingData, RunData, default_points, read_recording
+from guidefit.io import write_recording as write_h5
 
 pyuff = pytest.importorskip("pyuff")
 
-from guidefit.uff import (  # noqa: E402 - after the pyuff skip
+from guidefit.io.uff import (  # noqa: E402 - after the pyuff skip
     direction_code,
     point_nodes,
     read_uff_recording,

@@ -238,10 +238,10 @@ def test_another_structure_without_a_hit_point_is_rejected_not_passed(tmp_path):
 
 def test_unknown_hit_point_expects_every_mode_the_sensors_see():
     from guidefit.consistency import ShapeSet, observable_modes
-    from guidefit.labels import driving_row, sensor_matrix
+    from guidefit.io import Channel
     from guidefit.model import vibration as vib
     from guidefit.model.guides import load_guide
-    from guidefit.recording import Channel
+    from guidefit.modes.labels import driving_row, sensor_matrix
 
     model = vib.solve_modes(vib.model_from_guide(load_guide("MRB35")))
     points = default_points("MRB35")

@@ -38,8 +38,8 @@ DATA = ["nan", "inf", "zeros", "huge"]
 def uff_sets(tmp_path_factory):
     from guidefit.frf import compute_frf
     from guidefit.hits import iter_hits
+    from guidefit.io import read_recording, write_recording
     from guidefit.io.uff import write_frf_uff
-    from guidefit.recording import read_recording, write_recording
     from guidefit.simulate import SimulationConfig, simulate
 
     folder = tmp_path_factory.mktemp("uff_props")

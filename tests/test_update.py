@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from guidefit.ccx_deck import DeckError, load_deck, parse_joint_file, render_joint_file
 from guidefit.cli import main
 from guidefit.export import export
-from guidefit.update import UpdateError, parse_params
+from guidefit.machine.ccx_deck import DeckError, load_deck, parse_joint_file, render_joint_file
+from guidefit.machine.update import UpdateError, parse_params
 
 EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "machine"
 CCX = shutil.which("ccx")

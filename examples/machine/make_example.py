@@ -138,8 +138,8 @@ def write_inputs() -> None:
 
 def write_measured() -> None:
     """measured.csv and truth.json from the deck with the TRUTH factors."""
-    from guidefit.ccx_deck import find_ccx, load_deck, run_ccx, stage
-    from guidefit.update import joint_factors, parse_params
+    from guidefit.machine.ccx_deck import find_ccx, load_deck, run_ccx, stage
+    from guidefit.machine.update import joint_factors, parse_params
 
     deck = load_deck(HERE / "machine.inp")
     params = parse_params(list(TRUTH), len(deck.joints))

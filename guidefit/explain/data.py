@@ -236,7 +236,7 @@ def _checked_frequencies(measured, notes) -> tuple[list, list]:
 
 def _shape_sets(measured, guide, sensors, force_levels, notes) -> dict:
     """{channel names: ([mode index], [unit shape], rigid map, [scale])} of the modes with shapes."""
-    from guidefit.labels import sensor_matrix
+    from guidefit.modes.labels import sensor_matrix
 
     by_name = {s.name: s for s in sensors}
     channels = {c for m in measured if m.shape for c in m.shape}

@@ -55,11 +55,11 @@ def synthetic_modes(guide, effects=(), sensors=None, frequency_std: float = 1e-3
     >>> [m.label for m in modes]
     ['yaw', 'pitch', 'roll_low', 'vertical', 'roll_high']
     """
-    from guidefit.labels import sensor_matrix
     from guidefit.model import vibration as vib
     from guidefit.model.effects import Effect, apply_effects, make_effect, parse_effect
     from guidefit.model.effects.amplitude_dependence import amplitude_frequency, roller_modal
     from guidefit.model.guides import Guide, load_guide
+    from guidefit.modes.labels import sensor_matrix
 
     guide = guide if isinstance(guide, Guide) else load_guide(guide)
     effects = [parse_effect(e) if isinstance(e, str) else make_effect(e.name, e.parameters) if isinstance(

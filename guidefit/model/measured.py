@@ -133,7 +133,7 @@ def checked_sensor(name, position_m, direction, what: str) -> Sensor:
 
 
 def measured_mode(mode, what: str) -> MeasuredMode:
-    """The :class:`MeasuredMode` of an identified mode (:class:`guidefit.modeshapes.IdentifiedMode`).
+    """The :class:`MeasuredMode` of an identified mode (:class:`guidefit.modes.shapes.IdentifiedMode`).
 
     Its label, run, frequency, damping and standard deviation, and the real
     part of its modal constants as the shape (what ``identify --json``

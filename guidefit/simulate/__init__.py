@@ -103,12 +103,12 @@ from pathlib import Path
 import numpy as np
 
 from guidefit.errors import ModelError
-from guidefit.layouts import DEFAULT_RUNS, HammerRun
 from guidefit.model.guides import as_guide, guide_reference
 from guidefit.progress import progress_bar
+from guidefit.simulate.layouts import DEFAULT_RUNS, HammerRun
 
 # the physics moved to sim_physics (issue 22); its public names stay importable from here
-from guidefit.sim_physics import (  # noqa: F401
+from guidefit.simulate.physics import (  # noqa: F401
     DEFAULT_DAMPING,
     PALMGREN_EXPONENT,
     SUPPORT_DAMPING,
@@ -212,7 +212,7 @@ class SimulationConfig:
         Measuring points (guide point names) and axes of the accelerometers,
         the same in every run (used when ``sensor_layout`` is None).
     sensor_layout : str or None
-        Each run's accelerometers from a layout of :mod:`guidefit.layouts`
+        Each run's accelerometers from a layout of :mod:`guidefit.simulate.layouts`
         (``default``, ``both``, ``pair``, ``single``, ``side``,
         ``triax:A,C`` or a layout TOML file); None: ``sensors`` x ``axes``.
     adc_bits : int or None
@@ -279,8 +279,8 @@ def config_from_options(runs=None, hits=None, record_s=None, force_n=None, layou
     ``runs`` names runs of :data:`DEFAULT_RUNS` (a list or ``"vertical,lateral"``);
     ``force_n`` is ``(min, max)`` or ``"min,max"`` in N; ``faults`` are
     ``NAME[:param=value,...]`` texts; ``sensor_layout`` a layout of
-    :mod:`guidefit.layouts`; ``hit_points`` ``RUN:x,y,z`` texts that move a
-    run's hammer point (:func:`guidefit.layouts.apply_hits`).
+    :mod:`guidefit.simulate.layouts`; ``hit_points`` ``RUN:x,y,z`` texts that move a
+    run's hammer point (:func:`guidefit.simulate.layouts.apply_hits`).
 
     >>> cfg = config_from_options(runs="vertical", hits=3, force_n="100,150")
     >>> [r.name for r in cfg.runs], cfg.hits, cfg.force_n
@@ -317,7 +317,7 @@ def config_from_options(runs=None, hits=None, record_s=None, force_n=None, layou
     if sensor_layout is not None:
         changes["sensor_layout"] = str(sensor_layout)
     if hit_points:
-        from guidefit.layouts import apply_hits
+        from guidefit.simulate.layouts import apply_hits
 
         changes["runs"] = apply_hits(changes.get("runs", cfg.runs), hit_points)
     cfg = replace(cfg, **changes)
@@ -395,7 +395,7 @@ def _check_config(config: SimulationConfig, guide) -> None:
 
 def _layout(config, guide) -> dict:
     """Run name -> tuple of SensorSpec: the resolved ``sensor_layout``, or ``sensors`` x ``axes`` in every run."""
-    from guidefit.layouts import AXES, SensorSpec, resolve_layout
+    from guidefit.simulate.layouts import AXES, SensorSpec, resolve_layout
 
     if config.sensor_layout is not None:
         return resolve_layout(guide, config.sensor_layout, config.runs)
@@ -523,9 +523,9 @@ def simulate(guide, effects=(), config: SimulationConfig | None = None, seed: in
 
     Returns
     -------
-    recording : guidefit.recording.RecordingData
+    recording : guidefit.io.RecordingData
         What an experimenter's DAQ would have stored (float32, SI units);
-        write it with :func:`guidefit.recording.write_recording`.
+        write it with :func:`guidefit.io.write_recording`.
     truth : dict
         Effects, true modal table, K/c truth, hits; JSON-ready
         (:func:`truth_json`).
@@ -538,7 +538,7 @@ def simulate(guide, effects=(), config: SimulationConfig | None = None, seed: in
     >>> truth["parameters"]["f_V"]["value"] < truth["nominal_modes"][3]["frequency_hz"]
     True
     """
-    from guidefit.recording import RecordingData
+    from guidefit.io import RecordingData
 
     guide, config, faults, model = _prepare(guide, effects, config)
     runs, runs_truth = [], {}
@@ -622,7 +622,7 @@ def _iter_run(model: _Model, config, run: HammerRun, seed: int, faults, hits_tru
 
 
 def _run_data(config, guide, run: HammerRun, data=None):
-    from guidefit.recording import RunData
+    from guidefit.io import RunData
 
     names, units, positions, directions = _channels(config, guide, run)
     d = np.asarray(run.direction, float)
@@ -645,7 +645,7 @@ def _run_truth(run: HammerRun, hits_truth: list) -> dict:
 
 def _stream_h5(path: Path, guide, effects, config, seed: int, progress: bool) -> dict:
     """Write a ``signals`` simulation to HDF5 block by block (bounded memory); return the truth."""
-    from guidefit.recording import open_signals_writer
+    from guidefit.io import open_signals_writer
 
     guide, config, faults, model = _prepare(guide, effects, config)
     runs_truth = {}
@@ -790,7 +790,7 @@ def write_simulation(path, guide, effects=(), config: SimulationConfig | None = 
     ...     [p.name for p in out.recordings], out.truth_path.name
     (['test.h5'], 'test.truth.json')
     """
-    from guidefit.recording import RecordingData, write_recording
+    from guidefit.io import RecordingData, write_recording
 
     path = Path(path)
     suffix = path.suffix.lower().lstrip(".")

@@ -1,8 +1,8 @@
 """Modal curve fitting of one run's FRFs: variable projection of poles and residues in a band
 (:func:`fit_band`, :func:`fit_modes`) and the automatic per-run fit (:func:`auto_fit`).
 
-Built on :mod:`guidefit.modal_base` (types, peak picking, :func:`guidefit.modal_base.synthesize`)
-and on :mod:`guidefit.fitcore` (the basis, least squares and derivative it shares with the global fit);
+Built on :mod:`guidefit.modes.base` (types, peak picking, :func:`guidefit.modes.base.synthesize`)
+and on :mod:`guidefit.modes.fitcore` (the basis, least squares and derivative it shares with the global fit);
 every public name here is importable from :mod:`guidefit.modes` too.
 """
 
@@ -14,12 +14,12 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from guidefit import fitcore
 from guidefit.errors import IdentificationError
-from guidefit.halfpower import half_power, sdof_from_half_power
+from guidefit.modes import fitcore
+from guidefit.modes.halfpower import half_power, sdof_from_half_power
 
 __all__ = ["auto_fit", "fit_band", "fit_modes"]
-from guidefit.modal_base import (
+from guidefit.modes.base import (
     BandFit,
     HalfPowerWarning,
     Mode,
@@ -71,7 +71,7 @@ class _Problem:
     def jacobian(self, wn, zeta) -> np.ndarray | None:
         """d residual / d (ln w_n, ln zeta), shape (2F R, 2n); ``None`` if rank deficient.
 
-        The exact variable-projection derivative (:func:`guidefit.fitcore.projected_jacobian`):
+        The exact variable-projection derivative (:func:`guidefit.modes.fitcore.projected_jacobian`):
         one factorisation per channel group instead of the 2n extra residual
         evaluations of finite differences. Column scaling does not change the
         projection, so the unit-norm design is used with its columns'

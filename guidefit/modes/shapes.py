@@ -2,9 +2,9 @@ r"""Mode shapes at the sensors: rigid-body motion of the carriage, kinetic-energ
 
 Shared by :mod:`guidefit.identify` and :mod:`guidefit.modal_stage`: the
 least-squares carriage motion (u, v, theta, psi, phi) behind a shape at the
-sensors (whose matrix is :func:`guidefit.labels.sensor_matrix`), the
+sensors (whose matrix is :func:`guidefit.modes.labels.sensor_matrix`), the
 kinetic-energy shares of a motion, and :class:`IdentifiedMode`, the labelled
-mode of an identification (the labels come from :mod:`guidefit.labels`).
+mode of an identification (the labels come from :mod:`guidefit.modes.labels`).
 
 Examples
 --------
@@ -48,7 +48,7 @@ class IdentifiedMode:
     global_index: int | None = field(default=None, compare=False)  # index into the GlobalFit's modes
     carriage_energy: float | None = None  # share of the mode's kinetic energy in the carriage (q^T M q)
     label_basis: str | None = None  # what decided the label: "shape", "frequency", "shape+frequency"
-    label_note: str = ""  # the labeller's plain sentence (guidefit.labels)
+    label_note: str = ""  # the labeller's plain sentence (guidefit.modes.labels)
     label_mac: float | None = None  # MAC with the model mode's predicted readings at the sensors
     label_scale: float | None = None  # driving-point scale against the model mode (1: as predicted)
 
@@ -126,8 +126,8 @@ def _half_power_entry(frf, mode) -> dict | None:
     """Eq. (26)/(28) on the channel that shows the mode most, with the correction of the FrfSet's window."""
     import warnings as _w
 
-    from guidefit import halfpower
-    from guidefit.windows import undo_window_damping
+    from guidefit.frf.windows import undo_window_damping
+    from guidefit.modes import halfpower
 
     channel = int(np.argmax(np.abs(mode.residues)))
     peak = int(np.argmin(np.abs(frf.frequency_hz - mode.peak_frequency_hz)))

@@ -1,7 +1,7 @@
 """The paper's half-power method: the -3 dB band of a resonance peak and the natural frequency and
 damping it gives, Eq. (26)-(29) as :func:`guidefit.identify` applies them, with the peak corrections.
 
-Part of the modal stage beside :mod:`guidefit.modal_base` (types, peak picking); every name here is
+Part of the modal stage beside :mod:`guidefit.modes.base` (types, peak picking); every name here is
 importable from :mod:`guidefit.modes` too.
 """
 
@@ -13,7 +13,7 @@ import warnings
 import numpy as np
 
 from guidefit.errors import IdentificationError
-from guidefit.modal_base import (
+from guidefit.modes.base import (
     _KINDS,
     _PEAK_INTERPOLATIONS,
     HalfPower,

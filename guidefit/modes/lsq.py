@@ -2,7 +2,7 @@
 
 identify's modal stage solves a few least-squares problems of 2-20
 parameters: the shared poles of the global fit (given the normal equations
-of the variable-projection problem, :mod:`guidefit.globalvp`) and the
+of the variable-projection problem, :mod:`guidefit.modes.globalvp`) and the
 mass-normalised carriage motion of a mode (:mod:`guidefit.modal_stage`).
 :func:`scipy.optimize.least_squares` solves them well, but importing
 :mod:`scipy.optimize` costs 0.2 s (its package pulls linprog, shgo, the

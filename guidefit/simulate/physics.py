@@ -467,7 +467,7 @@ def hit_response(model: _Model, position_m, direction, pulses, t_s, sensor_posit
     d = np.asarray(direction, float)
     d = d / np.linalg.norm(d)
     sol = model.solution
-    from guidefit.labels import Sensor, sensor_matrix
+    from guidefit.modes.labels import Sensor, sensor_matrix
 
     sensor_rows = sensor_matrix([Sensor("", p, dr) for p, dr in zip(sensor_positions_m, sensor_directions)])
     b_q = np.zeros(sol.shapes.shape[0])

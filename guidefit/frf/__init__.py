@@ -1,7 +1,7 @@
 r"""Frequency response functions of impact-hammer hits: windows, H1/H2/Hv, coherence.
 
-The windows are in :mod:`guidefit.windows`, the streaming FFT engine that
-makes the spectral sums in :mod:`guidefit.spectra`, the :class:`FrfSet` data
+The windows are in :mod:`guidefit.frf.windows`, the streaming FFT engine that
+makes the spectral sums in :mod:`guidefit.frf.spectra`, the :class:`FrfSet` data
 type and its estimator formulas in :mod:`guidefit.frfset`; their names are
 importable from here as well (this module is the FRF stage's entrance). FRF
 files (``frf.csv``, ``frf.h5``) are written and read in
@@ -139,20 +139,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from guidefit.errors import IdentificationError
-from guidefit.frfset import (  # (re-exported: the FrfSet type and its estimators, importable from here)
-    ESTIMATORS,
-    FrfSet,
-    _check_estimator,
-    _frfset_from_sums,
-    coherence_from_sums,
-    estimate_frf,
-)
-from guidefit.io.frf_files import (  # (re-exported: the documented FRF file functions' old home)
-    read_frf_h5,
-    write_frf_csv,
-    write_frf_h5,
-)
-from guidefit.spectra import (  # noqa: F401  (re-exported: the FRF engine's names, importable from here)
+from guidefit.frf.spectra import (  # noqa: F401  (re-exported: the FRF engine's names, importable from here)
     DEFAULT_GROUPS,
     PAIR_HITS_PER_GROUP,
     PRECISIONS,
@@ -168,7 +155,7 @@ from guidefit.spectra import (  # noqa: F401  (re-exported: the FRF engine's nam
     fft_dtype,
     spectral_sums,
 )
-from guidefit.windows import (  # noqa: F401  (re-exported: the windows, importable from here)
+from guidefit.frf.windows import (  # noqa: F401  (re-exported: the windows, importable from here)
     FORCE_OFFSET_FRACTION,
     FORCE_TAPER_FRACTION,
     FORCE_WINDOW_PULSES_AFTER,
@@ -181,6 +168,19 @@ from guidefit.windows import (  # noqa: F401  (re-exported: the windows, importa
     exponential_window,
     exponential_window_damping_correction,
     force_window,
+)
+from guidefit.frfset import (  # (re-exported: the FrfSet type and its estimators, importable from here)
+    ESTIMATORS,
+    FrfSet,
+    _check_estimator,
+    _frfset_from_sums,
+    coherence_from_sums,
+    estimate_frf,
+)
+from guidefit.io.frf_files import (  # (re-exported: the documented FRF file functions' old home)
+    read_frf_h5,
+    write_frf_csv,
+    write_frf_h5,
 )
 
 __all__ = [
@@ -289,7 +289,7 @@ def compute_frf(
 
     Parameters
     ----------
-    run : guidefit.recording.Run or similar
+    run : guidefit.io.Run or similar
         Uses ``name``, ``sample_rate_hz``, ``channels`` (each with ``.name``),
         ``force_index`` and ``pretrigger_samples``.
     hits : iterable of guidefit.hits.Hit or similar

@@ -18,7 +18,7 @@ from collections.abc import Iterable, Iterator
 import numpy as np
 
 from guidefit.errors import IdentificationError, RecordingError
-from guidefit.windows import _force_offset
+from guidefit.frf.windows import _force_offset
 
 #: Default number of jackknife groups (fewer when there are fewer hits).
 DEFAULT_GROUPS = 8

@@ -1,8 +1,8 @@
 r"""Machine-level model updating of guidefit joints: ``guidefit update DECK MEASURED --param ...``.
 
-The deck (:mod:`guidefit.ccx_deck`) ``*INCLUDE``\ s joints exported by
+The deck (:mod:`guidefit.machine.ccx_deck`) ``*INCLUDE``\ s joints exported by
 guidefit; the measured modes are read as ``correlate`` reads them
-(:func:`guidefit.correlate.read_test`: guidefit JSON, UFF-55, CSV). The
+(:func:`guidefit.machine.correlate.read_test`: guidefit JSON, UFF-55, CSV). The
 parameters are factors on exported joint stiffnesses, p = f * (exported
 value), fitted as theta = ln f within bounds.
 
@@ -12,7 +12,7 @@ Parameters (``--param SEL:NAME[=LO..HI]``)
 ``K_V`` (y, vertical), ``K_pitch`` (rx), ``K_yaw`` (ry), ``K_roll`` (rz),
 or ``K`` (every direction: the whole matrix). The factor scales the joint as
 K' = D K D, D = diag(sqrt f) over the named directions
-(:mod:`guidefit.ccx_deck`). ``SEL`` which joints: ``joint2`` (one),
+(:mod:`guidefit.machine.ccx_deck`). ``SEL`` which joints: ``joint2`` (one),
 ``joint1,joint3`` (one factor shared by the two), ``all`` (one factor
 shared by every joint) or ``each`` (one factor per joint). ``LO..HI`` the
 factor's bounds (default 0.1..10; they must hold 1, the exported value).
@@ -23,7 +23,7 @@ Residuals and solver
 --------------------
 Per paired test mode r_j = (f_FE,j - f_test,j) / f_test,j / sigma (Eq. 34 as
 a fraction, over the relative measurement std sigma); pairing as
-:func:`guidefit.correlate.correlate` (MAC where shapes share points, else
+:func:`guidefit.machine.correlate.correlate` (MAC where shapes share points, else
 order with a warning), redone at every solver run. The Jacobian
 dr/dtheta is forward differences (step :data:`FD_STEP` in ln f; backward at an
 upper bound), one ccx run per parameter, run in parallel (``jobs``);
@@ -59,8 +59,8 @@ from pathlib import Path
 
 import numpy as np
 
-from guidefit.ccx_deck import Deck, DeckError, find_ccx, load_deck, render_joint_file, run_ccx, stage
-from guidefit.correlate import CorrelateError, Correlation, correlate
+from guidefit.machine.ccx_deck import Deck, DeckError, find_ccx, load_deck, render_joint_file, run_ccx, stage
+from guidefit.machine.correlate import CorrelateError, Correlation, correlate
 
 #: model directions scaled by each parameter name (indices into x, y, z, rx, ry, rz)
 NAMES = {"K_H": (0,), "K_V": (1,), "K_pitch": (3,), "K_yaw": (4,), "K_roll": (5,), "K": (0, 1, 2, 3, 4, 5)}
@@ -357,7 +357,7 @@ def update(deck_path, measured_path, param_texts, *, point_map_path=None, freq_s
     """
     from scipy.optimize import least_squares
 
-    from guidefit.correlate import read_point_map, read_test
+    from guidefit.machine.correlate import read_point_map, read_test
 
     t0 = time.perf_counter()
     deck = load_deck(deck_path)

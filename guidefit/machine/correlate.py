@@ -161,7 +161,7 @@ def read_test_frfs(path, fe: FEModes, band_hz: tuple | None = None) -> FEModes:
     """Modes of measured FRFs (UFF-58 type 4 or guidefit's frf.h5) by guidefit's global estimator.
 
     All runs (one per reference) are fitted together
-    (:func:`guidefit.globalfit.global_fit`: LSCF stabilisation diagram, pole
+    (:func:`guidefit.modes.globalfit.global_fit`: LSCF stabilisation diagram, pole
     selection, shared-pole least squares) in ``band_hz`` (default
     :func:`fit_band` of the FE modes). Each mode's shape at the response DOFs
     is the rank-one fit psi L^T of its residues (DOFs x references) over the
@@ -170,9 +170,9 @@ def read_test_frfs(path, fe: FEModes, band_hz: tuple | None = None) -> FEModes:
     (their scale relative to it is unknown), made real by the best phase.
     """
     from guidefit.errors import GuidefitError as _Error
-    from guidefit.globalfit import global_fit
     from guidefit.io.frf_files import read_frf_file
-    from guidefit.modeshapes import real_shape
+    from guidefit.modes.globalfit import global_fit
+    from guidefit.modes.shapes import real_shape
 
     try:
         frfs = read_frf_file(path)

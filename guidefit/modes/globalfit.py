@@ -29,7 +29,7 @@ channels of a recording together, in a band that holds every carriage mode:
    frequency enters the selection.
 3. :func:`global_fit` -- the selected poles start a variable-projection
    least-squares fit of poles and residues on all FRFs together
-   (:mod:`guidefit.globalvp`, exact normal equations), with lower and upper
+   (:mod:`guidefit.modes.globalvp`, exact normal equations), with lower and upper
    residual terms per FRF for the modes outside the band. Its uncertainty
    combines the fit's own standard error, the delete-a-group jackknife over
    hits of the whole global fit, and the spread over pole selection (the fit
@@ -62,9 +62,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from guidefit import fitcore
 from guidefit.errors import IdentificationError
-from guidefit.globalvp import Fit, SharedProblem, gauss_newton, solve
+from guidefit.modes import fitcore
+from guidefit.modes.globalvp import Fit, SharedProblem, gauss_newton, solve
 
 #: stability limits between consecutive orders: frequency, damping (relative), participation MAC
 STABLE_FREQUENCY = 0.01
@@ -235,7 +235,7 @@ def _lscf_poles(R, S, T, n: int, m: int, ts: float) -> np.ndarray:
 def _participation(f: np.ndarray, H: np.ndarray, poles: np.ndarray, problem: SharedProblem | None = None) -> np.ndarray:
     """(n, O) complex modal constants of each pole in every FRF by linear least squares (LSFD).
 
-    ``problem``: a :class:`guidefit.globalvp.SharedProblem` of ``(f, H)`` (unit scale, one group, no
+    ``problem``: a :class:`guidefit.modes.globalvp.SharedProblem` of ``(f, H)`` (unit scale, one group, no
     shift) when the caller has one: its design (the same numbers as ``fitcore.basis``, residual-term
     columns made once) and stacked ``H`` serve every order of a diagram.
     """
@@ -499,7 +499,7 @@ class GlobalFit:
         """The fitted model of one run's FRFs on :attr:`frequency_hz`, ``(F, R_run)``; with the run's
         ``window_tau_s`` as its windowed FRFs were measured (the model at ``s + 1/tau``), else the
         system's own FRFs."""
-        from guidefit import modal_base
+        from guidefit.modes import base as modal_base
 
         sl = self.runs[run]
         res = {k: np.asarray(v)[sl] for k, v in self.residuals.items()}
@@ -512,7 +512,7 @@ def _grid_key(frf) -> tuple:
     return (f.size, round(float(f[0]), 6), round(float(f[1] - f[0]), 9) if f.size > 1 else 0.0)
 
 
-# the variable-projection problem and its solvers (guidefit.globalvp)
+# the variable-projection problem and its solvers (guidefit.modes.globalvp)
 _Shared = SharedProblem
 _Fit = Fit
 _solve_shared = solve
@@ -582,7 +582,7 @@ def _jackknife(frfs: list, band, modes, prob: _Shared, poles=None) -> list:
     simulated test matrix, at 1/8 of their cost. The residual change is
     linear in the data, ``r_g - r_0 = (I - P)(Y_g - Y_0)``, so every
     replicate's step comes from one product with the projected derivatives
-    (:meth:`guidefit.globalvp.SharedProblem.gradient_of`).
+    (:meth:`guidefit.modes.globalvp.SharedProblem.gradient_of`).
     """
     n_groups = max((getattr(x, "n_groups", 0) for x in frfs), default=0)
     if n_groups < 3 or not modes:

@@ -129,7 +129,7 @@ def driving_row(direction, position_m) -> np.ndarray | None:
 class RunView:
     """What the labeller needs of a run: its channels (in modal-constant order) and its hit."""
 
-    channels: tuple  # objects with position_m and direction (guidefit.recording.Channel)
+    channels: tuple  # objects with position_m and direction (guidefit.io.Channel)
     excitation_direction: tuple
     excitation_position_m: tuple | None = None
 

@@ -1,6 +1,6 @@
 r"""A CalculiX deck that ``*INCLUDE``\ s guidefit joints: find the joints, scale them, run ``ccx``.
 
-Used by ``guidefit update`` (:mod:`guidefit.update`).
+Used by ``guidefit update`` (:mod:`guidefit.machine.update`).
 
 Finding the joints
 ------------------

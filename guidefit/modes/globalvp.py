@@ -1,6 +1,6 @@
 r"""The variable-projection problem of the global fit: shared poles, residues per FRF column.
 
-The global fit (:mod:`guidefit.globalfit`) models every FRF column ``o`` of
+The global fit (:mod:`guidefit.modes.globalfit`) models every FRF column ``o`` of
 every run as ``sum_k A_ko s^2/(s - p_k) + conj + residual terms``, the poles
 ``p_k`` shared, the residues and residual-term coefficients linear. Variable
 projection (Golub and Pereyra 1973) eliminates the linear coefficients: for
@@ -26,7 +26,7 @@ derivative columns with ``[A, dA, E]`` (:meth:`SharedProblem._project`), so
 no ``(2 F O, 2n)`` Jacobian is formed, and no SVD of one is taken at every
 iteration (26 304 x 8 on the 100-hit benchmark recording: 3288 bins, 4
 columns, 4 modes), as ``scipy.optimize.least_squares`` did. :func:`solve`
-iterates with :func:`guidefit.lsq.minimize` (bounded Levenberg-Marquardt) on
+iterates with :func:`guidefit.modes.lsq.minimize` (bounded Levenberg-Marquardt) on
 these normal equations, to a tighter tolerance than scipy's ``trf`` was run
 with; :func:`gauss_newton` steps on the equivalent small problem of
 :func:`compressed` (a residual of ``2n + 1`` entries with the same norm,
@@ -53,8 +53,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from guidefit import fitcore
-from guidefit.modal_base import Mode
+from guidefit.modes import fitcore
+from guidefit.modes.base import Mode
 
 #: a derivative column keeping less than this share of its squared norm outside the design's span is
 #: projected explicitly (:meth:`SharedProblem._project`)
@@ -74,7 +74,7 @@ class SharedProblem:
     ----------
     f : (F,) frequencies (Hz); H : (F, O) complex FRF columns
     groups : list of slices of the columns, one per run; shifts : ``1/tau`` (1/s) per group (0: no window)
-    terms : residual terms (:data:`guidefit.fitcore.DEFAULT_RESIDUALS`); scale : (O,) column weights
+    terms : residual terms (:data:`guidefit.modes.fitcore.DEFAULT_RESIDUALS`); scale : (O,) column weights
         (default ``1 / RMS`` of each column)
 
     The fits of the last pole set are kept: a residual, then the normal
@@ -101,7 +101,7 @@ class SharedProblem:
     def _design(self, p, shift):
         """Unit-norm design ``(2F, L)`` at the poles ``p`` for a group's window shift, and the column norms.
 
-        The values of ``guidefit.fitcore.stack(guidefit.fitcore.basis(s + shift, p, terms))`` (the same
+        The values of ``guidefit.modes.fitcore.stack(guidefit.modes.fitcore.basis(s + shift, p, terms))`` (the same
         element-wise operations, written into one array; the residual-term columns, which do not
         depend on the poles, made once per shift).
         """
@@ -233,7 +233,7 @@ class SharedProblem:
         their norm outside the design's span (0.45-0.67 on the benchmark
         files, 1e-15 relative error in D), and a column below
         :data:`EXPLICIT_PROJECTION` of it is projected explicitly instead
-        (:func:`guidefit.fitcore.ls_fit`'s fit with one refinement step).
+        (:func:`guidefit.modes.fitcore.ls_fit`'s fit with one refinement step).
         """
         n = wn.size
         A, solve = fit["Phi"], fit["solve"]
@@ -342,12 +342,12 @@ def solve(prob: SharedProblem, init, band, *, uncertainty=True, max_nfev=200, to
     """Variable-projection least squares of the shared poles from ``init`` [(f, zeta)], bounded to half the
     band's bottom .. twice its top and zeta in [1e-5, 0.7].
 
-    The iterations are :func:`guidefit.lsq.minimize`'s (Levenberg-Marquardt on the normal equations
+    The iterations are :func:`guidefit.modes.lsq.minimize`'s (Levenberg-Marquardt on the normal equations
     of :meth:`SharedProblem.normal`, run to ``tol**1.3``, tighter than scipy's ``trf`` with ``tol``
     was: they end where it ended, to 1e-11 in frequency on the check set of
     ``benchmarks/check_modal_same.py``), so that identify does not import :mod:`scipy.optimize`.
     """
-    from guidefit import lsq
+    from guidefit.modes import lsq
 
     wn0 = 2 * np.pi * np.array([a for a, _ in init])
     z0 = np.array([b for _, b in init])

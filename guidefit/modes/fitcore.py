@@ -1,8 +1,8 @@
-"""The fitting core shared by the per-run curve fit (:mod:`guidefit.curvefit`) and the global
-fit (:mod:`guidefit.globalfit`, :mod:`guidefit.globalvp`): the pole-residue basis, the linear
+"""The fitting core shared by the per-run curve fit (:mod:`guidefit.modes.curvefit`) and the global
+fit (:mod:`guidefit.modes.globalfit`, :mod:`guidefit.modes.globalvp`): the pole-residue basis, the linear
 least squares of variable projection and its exact derivative.
 
-The model is the pole-residue accelerance of :mod:`guidefit.modal_base`'s docstring,
+The model is the pole-residue accelerance of :mod:`guidefit.modes.base`'s docstring,
 ``H_r = (jw)^2 sum_k [A_rk/(jw - p_k) + A_rk*/(jw - p_k*)] + residual terms``, with real
 coefficients ``(Re A_rk, Im A_rk, ..., residual-term coefficients)``. For given poles the
 coefficients are a linear least-squares problem (:func:`basis`, :func:`stack`, :func:`ls_fit`);
@@ -41,7 +41,7 @@ RESIDUAL_TERMS = {
     "upper": lambda s: s * s,  # U_r (jw)^2: compliance of the modes above the band
     "upper_damping": lambda s: s**3,  # U1_r (jw)^3: their damping
 }
-#: the residual terms fitted unless the caller names others (see :func:`guidefit.curvefit.fit_modes`)
+#: the residual terms fitted unless the caller names others (see :func:`guidefit.modes.curvefit.fit_modes`)
 DEFAULT_RESIDUALS = ("lower", "lower_damping", "upper")
 #: (lowest, highest) damping ratio the nonlinear solvers allow; :func:`suspicious` flags a fit at them
 ZETA_BOUNDS = (1e-5, 0.7)
@@ -192,6 +192,6 @@ def unpack(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def suspicious(mode, lo: float, hi: float) -> bool:
     """Fitted mode outside the band ``[lo, hi]`` (Hz) or at a damping bound of the solvers
-    (:data:`ZETA_BOUNDS`: :func:`guidefit.curvefit.fit_band`, :func:`guidefit.globalvp.solve`)."""
+    (:data:`ZETA_BOUNDS`: :func:`guidefit.modes.curvefit.fit_band`, :func:`guidefit.modes.globalvp.solve`)."""
     z = mode.damping_ratio
     return not lo <= mode.frequency_hz <= hi or z > 0.69 or z < 2e-5

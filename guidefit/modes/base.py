@@ -74,8 +74,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from guidefit.fitcore import RESIDUAL_TERMS
-from guidefit.prominence import prominent_peaks
+from guidefit.modes.fitcore import RESIDUAL_TERMS
+from guidefit.modes.prominence import prominent_peaks
 
 __all__ = [
     "BandFit",
@@ -461,7 +461,7 @@ def synthesize(frequency_hz, modes: Sequence[Mode], residuals: dict | None = Non
     window_tau_s : float, optional
         The FRF as measured through an exponential window ``exp(-t/tau)`` on
         force and response: the whole model at ``s + 1/tau`` (what the
-        global fit fits, :mod:`guidefit.globalvp`). None: the system's own FRF.
+        global fit fits, :mod:`guidefit.modes.globalvp`). None: the system's own FRF.
 
     Returns
     -------
