@@ -4,7 +4,7 @@ Two checks on the modes that :func:`guidefit.identify.identify` found, both
 built on one fact: the carriage is a rigid body, so every mode's modal
 constants at the accelerometers (``Mode.modal_constants = phi(r) phi(e)``,
 1/kg) are the readings of one rigid motion ``q = (u, v, theta, psi, phi)``,
-``s = S q`` with ``S`` the sensor matrix (:func:`guidefit.labels.sensor_matrix`,
+``s = S q`` with ``S`` the sensor matrix (:func:`guidefit.modes.labels.sensor_matrix`,
 row ``r``: the sensor's direction times :func:`~guidefit.model.vibration.rigid_body_map`
 at its position).
 
@@ -83,6 +83,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from guidefit.model.vibration import JOINT_LABELS
+
 #: Relative RMS rigid-fit residual of all shapes below which no sensor fault is looked for.
 FAULT_MIN_RELRES = 0.01
 #: The best correction must cut the residual sum of squares at least this many times.
@@ -121,7 +123,7 @@ _AXES = {"x": np.array([1.0, 0.0, 0.0]), "y": np.array([0.0, 1.0, 0.0]), "z": np
 class ShapeSet:
     """The real modal constants (1/kg) of one run's modes at its sensors.
 
-    ``sensors`` is (n_channels, 5) (:func:`guidefit.labels.sensor_matrix`),
+    ``sensors`` is (n_channels, 5) (:func:`guidefit.modes.labels.sensor_matrix`),
     ``shapes`` (n_modes, n_channels); ``driving`` is the hammer's row (5,)
     (its direction times the rigid-body map at the hit point), None if unknown;
     ``labels`` and ``frequencies_hz`` name the modes, ``band_hz`` is where they
@@ -578,7 +580,7 @@ def plausibility(modes, missing, sets: list[ShapeSet], model) -> str | None:
         The guide's nominal modes.
     """
     by_label = {m.label: m for m in modes}
-    for label in ("vertical", "roll_low"):
+    for label in JOINT_LABELS.values():
         m = by_label.get(label)
         if m is not None and not any(v > 0 for v in m.energy.values()):
             return (f"no sensor sees carriage motion in the {label} mode at {m.frequency_hz:.0f} Hz: its label rests "
@@ -600,7 +602,7 @@ def plausibility(modes, missing, sets: list[ShapeSet], model) -> str | None:
                     f"{len(own)} carriage mode(s): the recording does not look like a carriage on this guide")
     strong = [r for r in misfit if r[3] >= STRONG and not math.isnan(r[4])]
     bad = [r for r in strong if r[4] > RIGID_MAX_RELRES]
-    joint_bad = [r for r in bad if r[1] in ("vertical", "roll_low")]
+    joint_bad = [r for r in bad if r[1] in JOINT_LABELS.values()]
     if strong and (joint_bad or 2 * len(bad) > len(strong)):
         worst = max(joint_bad or bad, key=lambda r: r[4])
         return (f"{len(bad)} of {len(strong)} strong mode shapes are not rigid-body motions of the carriage (run "
@@ -632,7 +634,7 @@ def mass_warnings(modes, sets: list[ShapeSet], mass_matrix: np.ndarray, mass_kg:
     """
     out = []
     for m in modes:
-        if m.label not in ("vertical", "roll_low"):
+        if m.label not in JOINT_LABELS.values():
             continue
         s = next((x for x in sets if x.run == m.run), None)
         if s is None or s.driving is None:
@@ -667,10 +669,10 @@ def shape_sets(runs, modes, hit_points: dict, band_hz=(None, None)) -> list[Shap
     ``hit_points`` maps run name to the hit position (m) or None; ``band_hz``
     is identify's (f_min_hz, f_max_hz) setting, the top cut to 0.4 times the
     run's sample rate as identify's search band is. The sensor rows and the
-    hammer's row are :func:`guidefit.labels.sensor_matrix` and
-    :func:`guidefit.labels.driving_row`.
+    hammer's row are :func:`guidefit.modes.labels.sensor_matrix` and
+    :func:`guidefit.modes.labels.driving_row`.
     """
-    from guidefit.labels import driving_row, sensor_matrix
+    from guidefit.modes.labels import driving_row, sensor_matrix
 
     out = []
     for run in runs:
@@ -766,7 +768,7 @@ def global_mass_warnings(runs, sets: list[ShapeSet], guide, model) -> list[str]:
     best = {}
     for r in runs:
         for m in r.modes:
-            if m.label not in ("vertical", "roll_low") or not m.shape:
+            if m.label not in JOINT_LABELS.values() or not m.shape:
                 continue
             size = max(abs(float(v)) for v in m.shape.values())
             if m.label not in best or size > best[m.label][0]:

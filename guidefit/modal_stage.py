@@ -3,7 +3,7 @@ r"""The modal stage of ``identify``: FRFs of every run -> global modes -> shapes
 :func:`identify_frfs` takes the FRF sets of a recording's runs and the
 geometry of their channels (what an FRF file can also provide) and returns
 the labelled modes of one modal model with shared poles
-(:func:`guidefit.globalfit.global_fit`):
+(:func:`guidefit.modes.globalfit.global_fit`):
 
 1. **Band.** From the model's range (0.35 x its lowest to 1.3 x its highest
    carriage mode), never above 0.4 x the sample rate, widened to hold the
@@ -16,7 +16,7 @@ the labelled modes of one modal model with shared poles
    selection spread in the std).
 3. **Shapes across runs.** A mode's modal constants in run ``j`` are
    ``phi(r) phi(e_j)``: the carriage motion ``q`` (u, v, theta, psi, phi) seen
-   by the run's sensors (:func:`guidefit.labels.sensor_matrix` ``S_j``),
+   by the run's sensors (:func:`guidefit.modes.labels.sensor_matrix` ``S_j``),
    scaled by the motion at the hit point ``c_j``. :func:`assemble_motion`
    fits ``m_j = c_j S_j q`` to all runs together (alternating least squares;
    then, when every run's hit point is known, ``c_j = g_j . q`` with
@@ -28,7 +28,7 @@ the labelled modes of one modal model with shared poles
    :func:`_resolve_groups` tests each motion's pure form against the
    hit-point residues.
 4. **Labels** from the model seen through each run's own sensors and hit
-   (:func:`guidefit.labels.label_modes`: shape and frequency evidence, one
+   (:func:`guidefit.modes.labels.label_modes`: shape and frequency evidence, one
    optimal assignment, ``label_basis`` per mode). The assembled motion of
    step 3 is a product (report, mode shapes, sensor check), not the labeller.
    A mode whose label the evidence does not decide is ``ambiguous`` with its
@@ -54,6 +54,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from guidefit.errors import IdentificationError
+from guidefit.model.vibration import JOINT_LABELS
 
 
 @dataclass(frozen=True)
@@ -70,7 +71,7 @@ class RunGeometry:
     """What the modal stage needs to know of a run besides its FRFs."""
 
     name: str
-    channels: tuple  # guidefit.recording.Channel (name, position_m, direction) in FRF column order
+    channels: tuple  # guidefit.io.Channel (name, position_m, direction) in FRF column order
     excitation_direction: tuple
     excitation_position_m: tuple | None = None
     sample_rate_hz: float | None = None
@@ -83,7 +84,7 @@ class ModalResult:
     modes: list  # IdentifiedMode, labelled (joint and other carriage modes)
     extras: list  # IdentifiedMode: unlabelled or ambiguous
     missing: list  # model labels not found
-    fit: object  # guidefit.globalfit.GlobalFit
+    fit: object  # guidefit.modes.globalfit.GlobalFit
     per_run: dict = field(default_factory=dict)  # run -> [Mode or None per global mode]
     band_hz: tuple = ()
     warnings: tuple = ()  # what the fit and the labeller found, one line each
@@ -291,7 +292,7 @@ def _assemble_in(basis, constants, sensors, drive, runs, iterations):
 def _driven_motion(q0, constants, sensors, drive, runs):
     """Least squares of m_j = (S_j q)(g_j . q) from the free-scale solution (mass-normalised q).
 
-    With at least as many readings as unknowns: :func:`guidefit.lsq.minimize` with the exact
+    With at least as many readings as unknowns: :func:`guidefit.modes.lsq.minimize` with the exact
     Jacobian ``-(S_j (g_j . q) + (S_j q) g_j^T)``; with fewer (a minimiser among many, which the
     path decides) scipy's ``trf`` as it always was.
     """
@@ -311,7 +312,7 @@ def _driven_motion(q0, constants, sensors, drive, runs):
         return q0
     start = q0 * math.sqrt(float(y @ b) / den)
     if sum(np.size(constants[r]) for r in runs) >= q0.size:
-        from guidefit import lsq
+        from guidefit.modes import lsq
 
         x = lsq.minimize(*lsq.from_residual(resid_jac), start, tol=1e-13).x
     else:
@@ -347,16 +348,16 @@ def identify_frfs(frf_by_run: dict, geometry: dict, guide, settings=None, model=
     IdentificationError
         When no stable mode is found in the band.
     """
-    from guidefit import globalfit
+    from guidefit.modes import globalfit
 
     with globalfit.one_blas_thread():  # small matrices only: see globalfit.one_blas_thread
         return _identify_frfs(frf_by_run, geometry, guide, settings, model)
 
 
 def _identify_frfs(frf_by_run, geometry, guide, settings, model) -> ModalResult:
-    from guidefit import globalfit
-    from guidefit.labels import driving_row, sensor_matrix
     from guidefit.model import vibration as vib
+    from guidefit.modes import globalfit
+    from guidefit.modes.labels import driving_row, sensor_matrix
 
     settings = settings or _DefaultSettings()
     spec = vib.model_from_guide(guide)
@@ -414,7 +415,7 @@ def _resolve_groups(q, observed, scale, constants, sensors, drive, mass):
     than the mode has (``q^T M q`` above :data:`MAX_CARRIAGE_ENERGY`), is out.
     Of the rest the one with most carriage energy is taken. The motion is a
     product (mode shapes, the sensor check); the label comes from
-    :mod:`guidefit.labels`. Returns ``(q, observed)``.
+    :mod:`guidefit.modes.labels`. Returns ``(q, observed)``.
     """
     runs = [r for r in constants if np.any(constants[r])]
     top = max((abs(s) for s in scale.values()), default=0.0) or 1.0
@@ -439,7 +440,7 @@ def _resolve_groups(q, observed, scale, constants, sensors, drive, mass):
 
 
 def _candidate(gf, k, sensors, drive, mass) -> dict:
-    from guidefit.modeshapes import energy_shares, real_shape
+    from guidefit.modes.shapes import energy_shares, real_shape
 
     m = gf.modes[k]
     mc = real_shape(m.modal_constants)  # one phase for all runs
@@ -460,10 +461,10 @@ def _candidate(gf, k, sensors, drive, mass) -> dict:
 
 
 def _scale_warnings(ev, mass_kg: float) -> list[str]:
-    """What the labeller's scales say (:class:`guidefit.labels.Evidence`): the whole recording, or one
+    """What the labeller's scales say (:class:`guidefit.modes.labels.Evidence`): the whole recording, or one
     run against the others, off by a unit factor or reversed in sign. K and c do not depend on either."""
     from guidefit.consistency import scale_factor_hint
-    from guidefit.labels import COMMON_SCALE_FACTOR
+    from guidefit.modes.labels import COMMON_SCALE_FACTOR
 
     reversed_ = "the excitation_direction, or every accelerometer's direction, is reversed"
     out = []
@@ -490,10 +491,10 @@ def _scale_warnings(ev, mass_kg: float) -> list[str]:
 
 
 def _labelled(gf, candidates, per_run, frf_by_run, geometry, model, band, mass_kg) -> ModalResult:
-    """The labelled modes of the global fit (:func:`guidefit.labels.label_modes`), with the labeller's
+    """The labelled modes of the global fit (:func:`guidefit.modes.labels.label_modes`), with the labeller's
     warnings (scale and sign, ambiguous, extra, missing) in ``ModalResult.warnings``."""
-    from guidefit import labels as lab_mod
-    from guidefit import modeshapes as ident
+    from guidefit.modes import labels as lab_mod
+    from guidefit.modes import shapes as ident
 
     views = {r: lab_mod.RunView(geometry[r].channels, geometry[r].excitation_direction,
                                 geometry[r].excitation_position_m) for r in gf.runs}
@@ -543,7 +544,7 @@ def _labelled(gf, candidates, per_run, frf_by_run, geometry, model, band, mass_k
                             f"predict it ({dec.note})")
             extras.append(entry)
         else:
-            if dec.basis == "frequency" and label in ("vertical", "roll_low"):
+            if dec.basis == "frequency" and label in JOINT_LABELS.values():
                 warnings.append(f"mode {label} at {m.frequency_hz:.1f} Hz: its label rests on its frequency alone "
                                 f"({dec.note}); guidefit plan shows which layout decides it by shape")
             modes.append(entry)
