@@ -372,6 +372,7 @@ def _force_levels(run, frf, rows, modes, settings) -> tuple[list[dict], list[str
     leaves it out of its neighbours' refits), but neither gives a level.
     """
     from guidefit import frf as frf_mod
+    from guidefit.frf.windows import window_settings_of
     from guidefit.hits import HitSettings, iter_hits
 
     accepted = [r for r in rows if r["accepted"]]
@@ -382,10 +383,7 @@ def _force_levels(run, frf, rows, modes, settings) -> tuple[list[dict], list[str
     forces = np.array([r["peak_force_n"] for r in accepted])
     if forces.max() < settings.min_force_ratio * forces.min():
         return [], []
-    # not windows.window_settings_of(frf) (yet): without an exponential window the bins get no force window either,
-    # unlike the run's FRF; the one rebuild moves these levels' frequencies by up to ~2 std (a behaviour change)
-    window = frf_mod.WindowSettings(force_window_s=frf.force_window_s, exp_tau_s=frf.exp_window_tau_s) \
-        if frf.exp_window_tau_s else frf_mod.WindowSettings(none=True)
+    window = window_settings_of(frf)  # each bin windowed as the run's own FRF (force window and taper, exp window)
     names = [ch.name for ch in frf_channels(run, frf)]
     levels = []
     for level_index, members in enumerate(np.array_split(np.argsort(forces), settings.force_bins)):

@@ -272,3 +272,32 @@ def test_stage_warnings_are_the_results_warnings(sample_result):
     assert [w for w in stage.warnings if "accepted hit(s)" in w] == [
         f"run '{r.name}': only {sum(h['accepted'] for h in rows)} accepted hit(s); uncertainties are unreliable"
         for r, _, rows in stage.collected]
+
+
+def test_force_level_bins_are_windowed_as_their_runs_frf(monkeypatch):
+    """Was: a run without an exponential window (the lateral run) had its force bins computed with no force
+    window at all, and the force taper was dropped: the levels compared FRFs windowed unlike the run's own."""
+    import inspect
+
+    import guidefit.frf as frf_mod
+    from guidefit.frf.windows import window_settings_of
+
+    seen = []
+    real = frf_mod.compute_frf
+
+    def spy(run, hits, **kw):
+        if inspect.stack()[1].function == "_force_levels":  # a force bin's FRF
+            seen.append((run.name, kw.get("window")))
+        return real(run, hits, **kw)
+
+    sample = SAMPLES / "mrb35_sample.h5"
+    result = identify(sample)
+    monkeypatch.setattr(frf_mod, "compute_frf", spy)
+    levels = identify(sample, settings=IdentifySettings(force_levels=True))
+    binned = list(seen)
+    assert {name for name, _ in binned} == {"vertical", "lateral"}
+    by_run = {r.name: r.frf for r in result.runs}
+    assert by_run["lateral"].exp_window_tau_s is None and by_run["lateral"].force_window_s > 0
+    for name, window in binned:
+        assert window == window_settings_of(by_run[name]), name
+    assert all(r.force_levels for r in levels.runs)
