@@ -342,9 +342,19 @@ def _identify_options(func):
     return _estimator_option(func)
 
 
-def _identify_settings(estimator="H1", no_jackknife=False, fft_precision="auto", **extra):
-    from guidefit.identify import IdentifySettings
+#: What identify imports after it has read a recording's metadata (the hit checks, the FFT engine,
+#: the modal stage): imported while the forked metadata reader works (io.watchdog), not after it.
+AFTER_METADATA_IMPORTS = ("scipy.fft", "concurrent.futures", "guidefit.hits", "guidefit.frf.spectra",
+                          "guidefit.modal_stage", "guidefit.modes.globalfit", "guidefit.consistency")
 
+
+def _identify_settings(estimator="H1", no_jackknife=False, fft_precision="auto", **extra):
+    """The settings of the commands that identify (identify, explain, report), and the imports their
+    identification needs, made while the recording's metadata is read (:data:`AFTER_METADATA_IMPORTS`)."""
+    from guidefit.identify import IdentifySettings
+    from guidefit.io import watchdog
+
+    watchdog.IMPORTS_WHILE_WAITING = AFTER_METADATA_IMPORTS
     return IdentifySettings(estimator=estimator, jackknife=not no_jackknife, fft_precision=fft_precision, **extra)
 
 

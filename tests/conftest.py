@@ -21,7 +21,11 @@ def _command_line_environment_stays_in_its_test():
     environment back after each test: other tests call the library as a library."""
     names = ("GUIDEFIT_HDF5_TIMEOUT_S", "OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
     before = {name: os.environ.get(name) for name in names}
+    from guidefit.io import watchdog
+
+    imports = watchdog.IMPORTS_WHILE_WAITING  # the identify commands set them
     yield
+    watchdog.IMPORTS_WHILE_WAITING = imports
     for name, value in before.items():
         if value is None:
             os.environ.pop(name, None)

@@ -208,6 +208,8 @@ def read_hdf5(p: Path, display: str) -> Recording:
     RecordingError. The fork costs about 30 ms per file on the development
     machine (42 against 8 ms for the sample recording).
     """
+    import h5py  # noqa: F401 - here, before a guard forks: else the child imports it too (25 ms on the critical path)
+
     return read_guarded(_read_hdf5_structure, p, display, "HDF5 file")
 
 

@@ -35,6 +35,23 @@ HDF5_METADATA_TIMEOUT_S = 0.0
 
 _CHILDREN: list[int] = []  # forked readers not reaped yet
 
+#: Modules the parent imports while a forked reader reads (the command line names those its next
+#: steps import anyway: the wait for the child then does their work). Imported on the calling thread
+#: after the fork, never by a thread before it (a fork while another thread imports can leave the
+#: child an import lock held for good).
+IMPORTS_WHILE_WAITING: tuple[str, ...] = ()
+
+
+def _import_while_waiting() -> None:
+    """Import :data:`IMPORTS_WHILE_WAITING`; one that fails is left to its real import to report."""
+    import importlib
+
+    for name in IMPORTS_WHILE_WAITING:
+        try:
+            importlib.import_module(name)
+        except Exception:  # noqa: BLE001 - an optional head start, not the import that counts
+            continue
+
 
 def timeout_s() -> float:
     """The deadline in force: env ``GUIDEFIT_HDF5_TIMEOUT_S``, else :data:`HDF5_METADATA_TIMEOUT_S`."""
@@ -104,6 +121,7 @@ def in_child(function, p: Path, display: str, timeout: float):
     answered = False
     try:
         with os.fdopen(read_end, "rb") as answer_file:
+            _import_while_waiting()
             while True:
                 left = deadline - time.monotonic()
                 ready = select.select([answer_file], [], [], left)[0] if left > 0 else []
