@@ -936,8 +936,9 @@ def _global_fit(frf_by_run, band_hz, orders, jackknife, selection_spread, weight
         plain = _Shared(f, H, groups, shifts, scale=_equal_scale(H))
         plain.share = prob  # the same design at the same poles
         modes = _conservative_std(plain, modes, poles)
-    jk, sp = _std_parts(frfs, band, modes, prob, poles, selection, diagram, (f, H, groups, shifts, step),
-                        jackknife, selection_spread)
+    jk = _jackknife(frfs, band, modes, prob, poles) if jackknife else [(None, None)] * len(modes)
+    thin = _Shared(f[::step], H[::step], groups, shifts) if step > 1 else prob  # a spread, not an estimate
+    sp = _selection_spread(thin, band, modes, selection, diagram) if selection_spread else [(None, None)] * len(modes)
     from dataclasses import replace
 
     parts, out = [], []
@@ -948,25 +949,6 @@ def _global_fit(frf_by_run, band_hz, orders, jackknife, selection_spread, weight
         out.append(replace(m, frequency_std_hz=_rss(m.frequency_std_hz, jf, sf, ef),
                            damping_std=_rss(m.damping_std, jz, sz, ez)))
     return GlobalFit(out, columns, runs, band, f, fit.residuals, diagram, selection, parts, excluded, fit.nrmse)
-
-
-def _std_parts(frfs, band, modes, prob, poles, selection, diagram, data, jackknife, selection_spread):
-    """The jackknife and the selection spread of every mode's (f, zeta); with a thinned grid for the
-    spread (long records) the two problems share nothing, and the spread runs on a second thread beside
-    the jackknife (the modal stage is otherwise serial on one core; numpy releases the GIL in both:
-    6-8 ms of the 0.12 s stage on the issue-20 file; the numbers are the same, each part computed alone)."""
-    f, H, groups, shifts, step = data
-    none = [(None, None)] * len(modes)
-    thin = _Shared(f[::step], H[::step], groups, shifts) if step > 1 else prob  # a spread, not an estimate
-    if jackknife and selection_spread and thin is not prob:
-        from concurrent.futures import ThreadPoolExecutor
-
-        with ThreadPoolExecutor(max_workers=1) as pool:
-            spread = pool.submit(_selection_spread, thin, band, modes, selection, diagram)
-            jk = _jackknife(frfs, band, modes, prob, poles)
-            return jk, spread.result()
-    jk = _jackknife(frfs, band, modes, prob, poles) if jackknife else none
-    return jk, (_selection_spread(thin, band, modes, selection, diagram) if selection_spread else none)
 
 
 def run_estimates(gf: GlobalFit, frf_by_run: dict, min_share: float = 0.01) -> dict:
