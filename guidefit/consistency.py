@@ -688,6 +688,25 @@ def shape_sets(runs, modes, hit_points: dict, band_hz=(None, None)) -> list[Shap
     return out
 
 
+def recorded_sets(runs, hit_points: dict, band_hz=(None, None)) -> list[ShapeSet]:
+    """One :class:`ShapeSet` without modes per recorded run (``guidefit.io`` ``Run``: its acceleration
+    channels, hammer row and search band up to 0.4 x its sample rate): what a run that gave no FRF
+    would have excited and seen (:func:`observable_modes`)."""
+    from guidefit.modes.labels import driving_row, sensor_matrix
+
+    out = []
+    for run in runs:
+        chans = [run.channels[i] for i in run.response_indices]
+        lo, hi = band_hz
+        band = (float(lo or 0.0), min(float(hi) if hi else math.inf, 0.4 * float(run.sample_rate_hz)))
+        out.append(ShapeSet(run.name, tuple(c.name for c in chans), sensor_matrix(chans),
+                            np.array([np.asarray(c.position_m, float) for c in chans]).reshape(-1, 3),
+                            np.array([np.asarray(c.direction, float) for c in chans]).reshape(-1, 3),
+                            np.zeros((0, len(chans))), driving_row(run.excitation_direction,
+                                                                    hit_points.get(run.name)), band_hz=band))
+    return out
+
+
 def _band(run, band_hz) -> tuple:
     """The search band of a run result: identify's settings, at most 0.4 fs (0.8 of the last FRF bin)."""
     freq = np.asarray(getattr(run.frf, "frequency_hz", [np.inf]), dtype=float)
@@ -730,7 +749,7 @@ class SensorCheck:
     warnings: tuple
 
 
-def _hit_points(recording) -> dict:
+def hit_points_of(recording) -> dict:
     """Run name -> hit point (m) or None when the file does not give it (:attr:`Run.hit_position_m`)."""
     return {r.name: r.hit_position_m for r in recording.runs}
 
@@ -750,7 +769,7 @@ def check_global(runs, recording, guide, settings, faults=None) -> SensorCheck:
     """
     from guidefit.model import vibration as vib
 
-    hit_points = _hit_points(recording)
+    hit_points = hit_points_of(recording)
     band = (getattr(settings, "f_min_hz", None), getattr(settings, "f_max_hz", None))
     modes = [m for r in runs for m in r.modes]
     sets = shape_sets(runs, modes, hit_points, band)

@@ -684,27 +684,39 @@ def conclude(path, recording, guide, model, settings: IdentifySettings, fit: Mod
     if gate is not None:
         gate += frame_hint(recording)
         params = joint_parameters(guide.mass_kg, {})
-    unidentified = () if gate is not None else _unidentified(joint, model, sets, [*modes, *res.extras])
+    fitted = {run.name for run, _, _ in (*fit.collected, *fit.levels_only)}
+    lost = consistency.recorded_sets([r for r in recording.runs if r.name not in fitted],
+                                     consistency.hit_points_of(recording), (settings.f_min_hz, settings.f_max_hz))
+    unidentified = () if gate is not None else _unidentified(joint, model, sets, [*modes, *res.extras], lost)
     return Identification(str(path), guide, tuple(runs), tuple(modes), params, tuple(warnings),
                           tuple(res.extras), tuple(res.missing), tuple(failed_rows), hits_checked=hits_checked,
                           modal=res, gate=gate, sensor_faults=fit.check.faults, unidentified=unidentified,
                           recording=recording if hits_checked else None)
 
 
-def _unidentified(joint: dict, model, sets, modes) -> tuple:  # modes: the named ones and the extras
+def _unidentified(joint: dict, model, sets, modes, lost=()) -> tuple:  # modes: the named ones and the extras
     """One sentence per joint parameter pair (f_V..c_V, f_H..c_H) left out although the set-up excites and
     sees its mode (:func:`guidefit.consistency.observable_modes`): not found, or found and not told apart
-    (``ambiguous``). A layout that cannot see the mode is not a failure (the result says what it cannot tell)."""
+    (``ambiguous``), or only a run that gave no FRF (every hit rejected; ``lost``, its
+    :func:`guidefit.consistency.recorded_sets`) excites and sees it. A layout that cannot see the mode is
+    not a failure (the result says what it cannot tell)."""
     from guidefit import consistency
 
     observable = consistency.observable_modes(model, sets)
     ambiguous = any(getattr(m, "label", None) == "ambiguous" for m in modes)
     out = []
     for key, label in JOINT_LABELS.items():
-        if joint.get(key) is None and label in observable:
+        if joint.get(key) is not None:
+            continue
+        if label in observable:
             why = "found but not told apart from another mode" if ambiguous else "not found"
             out.append(f"f_{key}, K_{key}, c_{key} not identified: the {label} mode this set-up excites and sees "
                        f"was {why} (the warnings say why)")
+            continue
+        failed = [s.run for s in lost if label in consistency.observable_modes(model, [s])]
+        if failed:
+            out.append(f"f_{key}, K_{key}, c_{key} not identified: run '{failed[0]}', which excites and sees the "
+                       f"{label} mode, gave no FRF (every hit rejected; the warnings say why)")
     return tuple(out)
 
 

@@ -152,8 +152,23 @@ def test_hits_of_a_run_without_frf_are_listed_as_rejected(tmp_path):
     assert result.parameters["f_V"]["value"] is None  # nothing made up from the rejected run
     assert result.parameters["f_H"]["value"] == pytest.approx(F_H, rel=2e-4)
     code, out, err = cli("identify", path)
-    assert code == 0, err
+    assert code == 1, err  # f_V is missing because the run that gives it failed: incomplete (below)
     assert "hits: 3 accepted, 3 rejected" in out
+
+
+def test_a_joint_mode_lost_with_its_failed_run_is_incomplete_not_exit_0(tmp_path):
+    """Was: every hit of the vertical run rejected (here: pushing against excitation_direction; a
+    clipped force, a dead channel alike) left f_V, K_V, c_V null with exit 0 and no error, as if
+    the layout could not see the vertical mode; the run that excites and sees it gave no FRF."""
+    path = _all_hits_rejected_in_vertical(tmp_path)
+    result = identify(path, settings=FAST)
+    assert result.parameters["K_V"]["value"] is None
+    assert result.parameters["K_H"]["value"] is not None
+    assert len(result.unidentified) == 1
+    assert "run 'vertical'" in result.unidentified[0] and "gave no FRF" in result.unidentified[0]
+    code, _, err = cli("identify", path)
+    assert code == 1
+    assert "identification incomplete" in err and "f_V, K_V, c_V not identified" in err
 
 
 def test_warning_of_a_failed_run_names_the_run_once(tmp_path):
