@@ -95,6 +95,10 @@ H5_CASES = {
     "channel count mismatch": (_set("runs/vertical/hits", "channel_names", ["force", "acc_A_y"]), "channel"),
     "wrong shape": (_replace_data(np.zeros((2000, 3))), "hits"),
     "complex dtype": (_replace_data(np.zeros((2, 2000, 3), complex)), "dtype"),
+    # was: exit 0 (a setup) or exit 1 with the plausibility gate's "neither joint mode found" (every position 1000x)
+    "positions in millimetres": (_set("runs/vertical/hits", "positions_m", [[0, 0, 0], [30, 0, 45], [-30, 0, 45]]),
+                                 "millimetres given?"),
+    "hit point in millimetres": (_set("runs/vertical", "excitation_position_m", [4.0, 0.0, 8.0]), "millimetres"),
     "missing sample rate": (_del("runs/vertical", "sample_rate_hz"), "sample_rate_hz"),
 }
 

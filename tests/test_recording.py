@@ -884,6 +884,8 @@ _unit_vectors = (
     .map(lambda v: tuple(np.asarray(v) / np.linalg.norm(v)))
 )
 _finite = st.floats(-1e3, 1e3, allow_nan=False, allow_infinity=False)
+# positions are metres in the carriage frame: within MAX_POSITION_M (1 m) of its origin (farther: mm read as m)
+_coord = st.floats(-0.5, 0.5, allow_nan=False, allow_infinity=False)
 _sample = st.one_of(st.floats(allow_nan=True, allow_infinity=True, width=64), _finite)
 
 
@@ -922,10 +924,10 @@ def run_data(draw, layout=None, csv=False):
         excitation_direction=draw(_unit_vectors),
         channel_names=names,
         units=units,
-        positions_m=[draw(st.tuples(_finite, _finite, _finite)) for _ in range(n)],
+        positions_m=[draw(st.tuples(_coord, _coord, _coord)) for _ in range(n)],
         directions=[draw(_unit_vectors) for _ in range(n)],
         data=data,
-        excitation_position_m=draw(st.none() | st.tuples(_finite, _finite, _finite)),
+        excitation_position_m=draw(st.none() | st.tuples(_coord, _coord, _coord)),
         pretrigger_samples=draw(st.none() | st.integers(0, n_samples - 1)),
     )
 

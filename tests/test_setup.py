@@ -207,6 +207,9 @@ MALFORMED = [
      r"test\.toml: channels\.acc_A_y: unknown key 'sensitivity_mV' \(did you mean 'sensitivity_mv'\?\)"),
     ("position of two numbers", ("sensitivity_mv = 10.2", "sensitivity_mv = 10.2\nposition_m = [0.03, 0.0]"),
      r"test\.toml: channels\.acc_A_y: position_m must be 3 numbers \(m\), got \[0\.03, 0\.0\]$"),
+    ("position in millimetres", ("sensitivity_mv = 10.2", "sensitivity_mv = 10.2\nposition_m = [30.0, 0.0, 45.0]"),
+     r"test\.toml: channels\.acc_A_y: position_m must be metres within 1 m of the carriage origin, got "
+     r"\[30\.0, 0\.0, 45\.0\] \(54\.1 m; millimetres given\?\)$"),
     ("direction not unit", ("sensitivity_mv = 10.2", "sensitivity_mv = 10.2\ndirection = [0.0, 2.0, 0.0]"),
      r"test\.toml: channels\.acc_A_y: direction must be a unit vector of 3 numbers, got \[0\.0, 2\.0, 0\.0\]"),
     ("channel name", ("[channels.acc_A_y]", "[channels.acc_A_q]"),

@@ -18,6 +18,10 @@ from guidefit.errors import RecordingError, first_line
 UNIT_VECTOR_TOLERANCE = 1e-3
 """Largest allowed | |d| - 1 | of a direction vector."""
 
+MAX_POSITION_M = 1.0
+"""Largest allowed distance (m) of a sensor or hit point from the carriage origin: a carriage is
+centimetres across, so a point metres away is a length in millimetres (1000x) read as metres."""
+
 
 def _frozen_array(value, dtype=np.float64) -> np.ndarray:
     arr = np.array(value, dtype=dtype, copy=True)
@@ -88,6 +92,18 @@ def _check_vector(value, where: str, name: str, unit: bool) -> np.ndarray:
                 f"{where}: {name} {_fmt_vec(vec)} has length {norm:.4g}; expected a unit vector "
                 f"(tolerance {UNIT_VECTOR_TOLERANCE:g})"
             )
+    return vec
+
+
+def _check_position(vec, where: str, name: str) -> np.ndarray:
+    """``vec`` (3 finite numbers, m) if within :data:`MAX_POSITION_M` of the carriage origin, else one
+    :class:`RecordingError` naming the likely cause (millimetres given as metres)."""
+    dist = float(np.linalg.norm(vec))
+    if dist > MAX_POSITION_M:
+        raise RecordingError(
+            f"{where}: {name} {_fmt_vec(vec)} is {dist:.3g} m from the carriage origin; positions are "
+            f"metres in the carriage frame, at most {MAX_POSITION_M:g} m (millimetres given?)"
+        )
     return vec
 
 

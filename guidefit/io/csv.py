@@ -21,6 +21,7 @@ import numpy as np
 from guidefit.errors import GuidefitError, RecordingError
 from guidefit.io._checks import (
     _atomic,
+    _check_position,
     _check_pretrigger,
     _check_sample_rate,
     _check_vector,
@@ -258,12 +259,14 @@ def _csv_excitation(meta, display: str) -> tuple[np.ndarray, np.ndarray | None]:
     )
     exc_pos = None
     if "excitation_position_m" in meta:
+        line = _csv_line_of(meta, "excitation_position_m", display)
         exc_pos = _check_vector(
             _csv_floats(*meta["excitation_position_m"], display, "excitation_position_m"),
-            _csv_line_of(meta, "excitation_position_m", display),
+            line,
             "excitation_position_m",
             False,
         )
+        exc_pos = _check_position(exc_pos, line, "excitation_position_m")
     return exc_dir, exc_pos
 
 

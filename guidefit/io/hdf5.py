@@ -29,6 +29,7 @@ import numpy as np
 from guidefit.errors import RecordingError
 from guidefit.io._checks import (
     _atomic,
+    _check_position,
     _check_pretrigger,
     _check_sample_rate,
     _check_vector,
@@ -534,6 +535,7 @@ def _run_attributes(attrs, where: str):
         exc_pos = _check_vector(
             attrs["excitation_position_m"], where, "excitation_position_m", False
         )
+        exc_pos = _check_position(exc_pos, where, "excitation_position_m")
     return rate, exc_dir, exc_pos
 
 

@@ -24,6 +24,7 @@ from guidefit.io._checks import (
     UNIT_VECTOR_TOLERANCE,
     _as_str_tuple,
     _check_data_array,
+    _check_position,
     _check_pretrigger,
     _check_sample_rate,
     _check_vector,
@@ -215,6 +216,7 @@ class RunData:
         )
         if self.excitation_position_m is not None:
             pos = _check_vector(self.excitation_position_m, where, "excitation_position_m", False)
+            pos = _check_position(pos, where, "excitation_position_m")
             set_(self, "excitation_position_m", _frozen_array(pos))
         names = _as_str_tuple(self.channel_names, where, "channel_names")
         units = _as_str_tuple(self.units, where, "units")
@@ -338,6 +340,8 @@ def _build_channels(where, names, units, positions, directions) -> tuple[tuple[C
             )
         scales.append(allowed[unit])
     pos = _table(positions, n, where, "positions_m")
+    for name, p in zip(names, pos):
+        _check_position(p, where, f"channel '{name}': position")
     dirs = _table(directions, n, where, "directions")
     for name, d in zip(names, dirs):
         norm = float(np.linalg.norm(d))

@@ -75,7 +75,7 @@ from pathlib import Path
 import numpy as np
 
 from guidefit.errors import GuidefitError, RecordingError
-from guidefit.io._checks import UNIT_VECTOR_TOLERANCE, _first_line, _valid_run_name
+from guidefit.io._checks import MAX_POSITION_M, UNIT_VECTOR_TOLERANCE, _first_line, _valid_run_name
 from guidefit.io._daq import ColumnSource, DaqChannel, DaqFile, RunOptions, common_dtype, same_rate
 from guidefit.io.geometry import _ACC_RE, default_channel_geometry
 from guidefit.io.records import ACCELERATION_UNITS, FORCE_UNITS, Recording, Run, RunData
@@ -199,6 +199,9 @@ def _vector(value, where: str, key: str, unit_vector: bool) -> np.ndarray:
         norm = float(np.linalg.norm(vec))
         if abs(norm - 1.0) > UNIT_VECTOR_TOLERANCE:
             raise SetupError(f"{where}: {key} must be {what}, got {_show(value)} (length {norm:.4g})")
+    elif float(np.linalg.norm(vec)) > MAX_POSITION_M:
+        raise SetupError(f"{where}: {key} must be metres within {MAX_POSITION_M:g} m of the carriage origin, "
+                         f"got {_show(value)} ({float(np.linalg.norm(vec)):.3g} m; millimetres given?)")
     return vec
 
 
