@@ -61,6 +61,7 @@ from guidefit.identify_runs import (
     _force_levels,
     _hit_row,
     _quality_warnings,
+    dead_channel_warnings,
     frf_channels,
 )
 from guidefit.model.vibration import JOINT_LABELS, UNNAMED_LABELS  # noqa: F401 - guidefit.identify.UNNAMED_LABELS
@@ -422,6 +423,7 @@ def _run_frf(run, settings: IdentifySettings, max_frequency_hz):
         text = str(exc)
         notes.append(text if text.startswith(f"run '{run.name}'") else f"run '{run.name}': {text}")
         return None, rows, notes
+    notes.extend(dead_channel_warnings(run.name, frf))
     n_ok = sum(r["accepted"] for r in rows)
     if n_ok < settings.min_accepted_hits:
         notes.append(f"run '{run.name}': only {n_ok} accepted hit(s); uncertainties are unreliable")

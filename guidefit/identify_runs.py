@@ -94,6 +94,21 @@ def _hit_row(run_name: str, hit) -> dict:
             "peak_force_n": float(hit.peak_force_n), "accepted": bool(hit.accepted), "reason": hit.reason}
 
 
+#: a channel whose largest |FRF| is below this fraction of its run's largest reads nothing (dead)
+DEAD_CHANNEL_FRACTION = 1e-9
+
+
+def dead_channel_warnings(run_name: str, frf) -> list[str]:
+    """One warning per response channel of ``frf`` that reads nothing in every accepted hit (its
+    FRF zero to :data:`DEAD_CHANNEL_FRACTION` of the run's largest): a dead sensor, an unplugged
+    cable or a channel exported empty; its shapes carry no information."""
+    size = np.nanmax(np.abs(np.asarray(frf.H)), axis=0) if np.size(frf.H) else np.zeros(0)
+    top = float(np.max(size)) if size.size else 0.0
+    return [f"run '{run_name}': channel '{name}' reads nothing (zero in every accepted hit): a dead sensor, an "
+            "unplugged cable or an empty export; it tells nothing about the modes (leave it out or fix it)"
+            for name, v in zip(frf.channels, size) if top > 0 and v <= DEAD_CHANNEL_FRACTION * top]
+
+
 def _narrow_band(mode) -> tuple[float, float]:
     """A band around one fitted mode: +/- max(3 zeta, 3 %) of its frequency."""
     half_width = max(3 * mode.damping_ratio, 0.03) * mode.frequency_hz

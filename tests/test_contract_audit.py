@@ -178,6 +178,19 @@ def test_warning_of_a_failed_run_names_the_run_once(tmp_path):
     assert failed and all(w.count("run 'vertical'") == 1 for w in failed)
 
 
+def test_a_dead_channel_is_named_not_silent(tmp_path):
+    """Was: a response channel holding 0.0 in every sample (dead sensor, unplugged cable) gave exit 0
+    and no warning at all, while the same channel held at 5 m/s^2 rejected every hit as clipped."""
+    spec = _two_runs(n_hits=3)
+    chans = spec["vertical"]["chans"]
+    k = next(i for i, c in enumerate(chans) if c[0] != "force")
+    spec["vertical"]["data"][..., k] = 0.0
+    result = identify(gen.write_file(tmp_path / "dead.h5", spec), settings=FAST)
+    dead = [w for w in result.warnings if "reads nothing" in w]
+    assert len(dead) == 1 and f"channel '{chans[k][0]}'" in dead[0] and "run 'vertical'" in dead[0]
+    assert result.parameters["f_V"]["value"] == pytest.approx(F_V, rel=1e-3)  # the others still give it
+
+
 PARAMETER_UNITS = {"f_V": "Hz", "zeta_V": "1", "K_V": "N/m", "c_V": "N*s/m",
                    "f_H": "Hz", "zeta_H": "1", "K_H": "N/m", "c_H": "N*s/m"}
 
