@@ -99,6 +99,8 @@ H5_CASES = {
     "positions in millimetres": (_set("runs/vertical/hits", "positions_m", [[0, 0, 0], [30, 0, 45], [-30, 0, 45]]),
                                  "millimetres given?"),
     "hit point in millimetres": (_set("runs/vertical", "excitation_position_m", [4.0, 0.0, 8.0]), "millimetres"),
+    # was: exit 0 with K_V null (the labels believed the excitation: x on y sensors sees no vertical mode)
+    "force across the hit": (_set("runs/vertical", "excitation_direction", [-1.0, 0.0, 0.0]), "line of action"),
     "missing sample rate": (_del("runs/vertical", "sample_rate_hz"), "sample_rate_hz"),
 }
 
@@ -148,6 +150,8 @@ CSV_HEADER = "# sample_rate_hz: 200000\n# excitation_direction: 0 -1 0\n# guide:
         ("force,acc_A_y\n1.0,2.0\n3.0,abc\n", "abc"),
         ("1.0,2.0\n3.0,4.0\n", "header"),
         ("force,acc_A_y,acc_A_y\n1,2,3\n", "acc_A_y"),
+        ("# directions: 1 0 0; 0 1 0\nforce,acc_A_y\n1,2\n3,4\n", "line of action"),  # force along x, hit along -y
+        ("# positions_m: 0 0 0; 30 0 45\nforce,acc_A_y\n1,2\n3,4\n", "millimetres"),
     ],
 )
 def test_malformed_csv(tmp_path, body, fragment):

@@ -128,8 +128,13 @@ def _csv_text(e: dict, seed: int):
     if e["positions"] is not None:
         rows = pos[:-1] if e["positions"] == "short" else pos
         lines.append("# positions_m: " + "; ".join(_vector_text(r) for r in rows))
-    dirs = np.array([AXES[name.strip().strip('"')[-1]] if name.strip().strip('"')[-1:] in AXES else (1.0, 0, 0)
-                     for name in names])
+    try:  # the force row along the hit: a force channel across excitation_direction is refused
+        hit = tuple(float(v) for v in e["excitation"].split())
+    except ValueError:
+        hit = ()
+    hit = hit if len(hit) == 3 else (1.0, 0, 0)
+    dirs = np.array([AXES[name.strip().strip('"')[-1]] if name.strip().strip('"')[-1:] in AXES
+                     else hit if name.strip().strip('"') == "force" else (1.0, 0, 0) for name in names])
     if e["directions"] == "flip":
         dirs = -dirs
     elif e["directions"] == "non_unit":

@@ -918,14 +918,16 @@ def run_data(draw, layout=None, csv=False):
             max_size=12,
         )
     )
+    hit = draw(_unit_vectors)
+    sign = draw(st.sampled_from([1.0, -1.0]))  # the force channel along the hit (either sign of its axis)
     return RunData(
         name=name,
         sample_rate_hz=draw(st.floats(1.0, 1e7)),
-        excitation_direction=draw(_unit_vectors),
+        excitation_direction=hit,
         channel_names=names,
         units=units,
         positions_m=[draw(st.tuples(_coord, _coord, _coord)) for _ in range(n)],
-        directions=[draw(_unit_vectors) for _ in range(n)],
+        directions=[tuple(sign * np.asarray(hit, float)) if c == "force" else draw(_unit_vectors) for c in names],
         data=data,
         excitation_position_m=draw(st.none() | st.tuples(_coord, _coord, _coord)),
         pretrigger_samples=draw(st.none() | st.integers(0, n_samples - 1)),

@@ -107,6 +107,21 @@ def _check_position(vec, where: str, name: str) -> np.ndarray:
     return vec
 
 
+def _check_force_axis(force_direction, excitation_direction, where: str) -> None:
+    """One :class:`RecordingError` when the force channel's direction and ``excitation_direction``
+    are different axes: both are the hammer's line of action (a positive force sample pushes the
+    carriage along ``excitation_direction``), so a file that gives two says one of them wrong.
+    Opposite signs of one axis pass (the sign of the load cell's axis is a convention; the force
+    samples' sign is checked per hit)."""
+    f = np.asarray(force_direction, float)
+    e = np.asarray(excitation_direction, float)
+    if abs(float(f @ e)) < 1.0 - UNIT_VECTOR_TOLERANCE:
+        raise RecordingError(
+            f"{where}: channel 'force' has direction {_fmt_vec(f)}, excitation_direction is {_fmt_vec(e)}; "
+            "both are the hammer's line of action: correct the one that is wrong"
+        )
+
+
 def _check_pretrigger(value, n_samples: int | None, where: str) -> int:
     arr = _numbers(value)
     ok = arr is not None and arr.size == 1 and float(arr.reshape(-1)[0]).is_integer()

@@ -21,6 +21,7 @@ import numpy as np
 from guidefit.errors import GuidefitError, RecordingError
 from guidefit.io._checks import (
     _atomic,
+    _check_force_axis,
     _check_position,
     _check_pretrigger,
     _check_sample_rate,
@@ -138,6 +139,7 @@ def _read_csv_stream(p: Path, display: str, fh) -> Recording:
     exc_dir, exc_pos = _csv_excitation(meta, display)
     units = _csv_units(meta, names, has_time, display)
     channels, force_index = _csv_channels(meta, names, units, exc_dir, exc_pos, guide, display)
+    _check_force_axis(channels[force_index].direction, exc_dir, display)
     pretrigger = None
     if "pretrigger_samples" in meta:
         where = _csv_line_of(meta, "pretrigger_samples", display)

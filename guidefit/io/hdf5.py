@@ -29,6 +29,7 @@ import numpy as np
 from guidefit.errors import RecordingError
 from guidefit.io._checks import (
     _atomic,
+    _check_force_axis,
     _check_position,
     _check_pretrigger,
     _check_sample_rate,
@@ -494,6 +495,7 @@ def _read_hdf5_run(p: Path, display: str, root, runs_group, name: str) -> Run:
     _check_run_dataset(ds, p, where, layout)
     dwhere = f"{where}: dataset '{layout}'"
     channels, force_index = _run_channels(ds, where, dwhere)
+    _check_force_axis(channels[force_index].direction, exc_dir, where)
     pretrigger = None
     if "pretrigger_samples" in ds.attrs:
         pretrigger = _check_pretrigger(ds.attrs["pretrigger_samples"], ds.shape[-2], dwhere)

@@ -24,6 +24,7 @@ from guidefit.io._checks import (
     UNIT_VECTOR_TOLERANCE,
     _as_str_tuple,
     _check_data_array,
+    _check_force_axis,
     _check_position,
     _check_pretrigger,
     _check_sample_rate,
@@ -220,7 +221,8 @@ class RunData:
             set_(self, "excitation_position_m", _frozen_array(pos))
         names = _as_str_tuple(self.channel_names, where, "channel_names")
         units = _as_str_tuple(self.units, where, "units")
-        channels, _ = _build_channels(where, names, units, self.positions_m, self.directions)
+        channels, force_index = _build_channels(where, names, units, self.positions_m, self.directions)
+        _check_force_axis(channels[force_index].direction, self.excitation_direction, where)
         set_(self, "channel_names", names)
         set_(self, "units", units)
         set_(self, "positions_m", _frozen_array([ch.position_m for ch in channels]))
