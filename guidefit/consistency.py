@@ -557,12 +557,33 @@ def _participation(s: ShapeSet, shapes: np.ndarray) -> np.ndarray:
     return np.abs(s.driving @ shapes)
 
 
+#: excitation_position_m and the force channel's position further apart than this (m) are two hit points
+HIT_POINT_TOLERANCE_M = 0.002
+
+
 def unknown_hit_warnings(recording) -> list[str]:
-    """One warning per run whose hit point the file does not give (:attr:`Run.hit_position_m` None)."""
-    return [f"run '{r.name}': the hit point is unknown (the file does not say where the hammer hit): the "
-            "plausibility gate expects every carriage mode its sensors see, and the labels do not use the "
-            "hammer's participation" for r in recording.runs
-            if r.hit_position_m is None]
+    """One warning per run whose hit point the file does not give (:attr:`Run.hit_position_m` None),
+    and one per run whose two hit points (``excitation_position_m`` and the force channel's
+    position) are more than :data:`HIT_POINT_TOLERANCE_M` apart."""
+    out = [f"run '{r.name}': the hit point is unknown (the file does not say where the hammer hit): the "
+           "plausibility gate expects every carriage mode its sensors see, and the labels do not use the "
+           "hammer's participation" for r in recording.runs
+           if r.hit_position_m is None]
+    for r in recording.runs:
+        given = getattr(r, "excitation_position_m", None)
+        if given is None or not getattr(r, "force_position_known", True):
+            continue
+        force = np.asarray(r.force_channel.position_m, float)
+        apart = float(np.linalg.norm(np.asarray(given, float) - force))
+        if apart > HIT_POINT_TOLERANCE_M:
+            out.append(f"run '{r.name}': excitation_position_m {_vec(given)} and the force channel's position "
+                       f"{_vec(force)} are {apart * 1000:.0f} mm apart; both are the hit point: the labels and "
+                       "the modal-constant checks use excitation_position_m (correct the one that is wrong)")
+    return out
+
+
+def _vec(v) -> str:
+    return "(" + ", ".join(format(float(x), "g") for x in np.asarray(v, float)) + ")"
 
 
 def plausibility(modes, missing, sets: list[ShapeSet], model) -> str | None:

@@ -191,6 +191,18 @@ def test_a_dead_channel_is_named_not_silent(tmp_path):
     assert result.parameters["f_V"]["value"] == pytest.approx(F_V, rel=1e-3)  # the others still give it
 
 
+def test_two_hit_points_of_one_run_are_named(tmp_path):
+    """Was: excitation_position_m 59 mm from the force channel's position (both the hit point) gave
+    only "modal constants 0.13 times the other runs' ... calibration off"; now a warning names both."""
+    spec = _two_runs(n_hits=2)
+    spec["vertical"]["position"] = (0.03, 0.0, -0.045)  # the force channel stays at the true hit point
+    result = identify(gen.write_file(tmp_path / "two_points.h5", spec), settings=FAST)
+    both = [w for w in result.warnings if "are the hit point" in w or "both are the hit point" in w]
+    assert len(both) == 1 and "run 'vertical'" in both[0] and "mm apart" in both[0]
+    assert not any("both are the hit point" in w for w in identify(
+        gen.write_file(tmp_path / "good.h5", _two_runs(n_hits=2)), settings=FAST).warnings)
+
+
 PARAMETER_UNITS = {"f_V": "Hz", "zeta_V": "1", "K_V": "N/m", "c_V": "N*s/m",
                    "f_H": "Hz", "zeta_H": "1", "K_H": "N/m", "c_H": "N*s/m"}
 
