@@ -339,7 +339,7 @@ def find_sensor_faults(sets: list[ShapeSet], mass_matrix: np.ndarray | None = No
         found = _best_correction(sets, res0, mass_matrix)
         if found is None:
             if not faults and MAX_FAULTS >= 2:  # two faults at once: no single correction explains them
-                pair = _best_pair(sets, res0)
+                pair = _best_pair(sets, res0, mass_matrix)
                 if pair is not None:
                     (first, second), fixed = pair
                     after = math.sqrt(_total(fixed)[0] / energy)
@@ -380,14 +380,22 @@ def _best_correction(sets, res0, mass_matrix):
     return fault, fixed
 
 
-def _best_pair(sets, res0):
+def _best_pair(sets, res0, mass_matrix=None):
     """((SensorFault, SensorFault), corrected sets) of the two-channel correction that explains the
-    residual (each channel's factor predicted with both left out), or None."""
+    residual (each channel's factor predicted with both left out), or None.
+
+    Pairs whose residual is within :data:`EQUIVALENT` of the best are told apart by physics
+    (:func:`_physical_choice`: positive driving-point residues, modal mass near M), as single
+    channels are: on side-face x sensors, two sign flips on one face and two on the diagonal fit
+    rigid motion equally well, the diagonal one by trading u for psi (the labels roll_low and yaw
+    then swap). Pairs physics cannot rule out are each fault's ``alternatives``.
+    """
     from itertools import combinations
 
     names = sorted({c for s in sets for c in s.channels})
-    best = None
+    trials = []
     for a, b in combinations(names, 2):
+        best = None
         for fa, axa_name, axa in _hypotheses(sets, a, exclude=b):
             if not _significant_fault(fa, axa_name):
                 continue
@@ -398,11 +406,20 @@ def _best_pair(sets, res0):
                 fixed = _corrected(once, b, fb, axb)
                 res = _total(fixed)[0]
                 if best is None or res < best[0]:
-                    best = (res, (a, fa, axa_name), (b, fb, axb_name), fixed)
-    if best is None or best[0] * FAULT_MIN_IMPROVEMENT > res0:
+                    best = (res, ((a, fa, axa_name), (b, fb, axb_name)), None, None, fixed)
+        if best is not None:
+            trials.append(best)
+    if not trials:
         return None
-    res, *pair, fixed = best
-    faults = tuple(SensorFault(n, "axis" if ax else "scale", f, ax, (), 0.0, 0.0) for n, f, ax in pair)
+    trials.sort(key=lambda t: t[0])
+    if trials[0][0] * FAULT_MIN_IMPROVEMENT > res0:
+        return None
+    equal = [t for t in trials if t[0] <= EQUIVALENT * trials[0][0] + 1e-9 * res0]
+    if len(equal) > 1:
+        equal = _physical_choice(equal, mass_matrix)
+    _, pair, _, _, fixed = equal[0]
+    others = tuple(dict.fromkeys(n for t in equal[1:] for n, _, _ in t[1] if n not in {m for m, _, _ in pair}))
+    faults = tuple(SensorFault(n, "axis" if ax else "scale", f, ax, others, 0.0, 0.0) for n, f, ax in pair)
     return faults, fixed
 
 

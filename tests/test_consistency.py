@@ -195,6 +195,32 @@ def test_two_faulty_channels_at_once(tmp_path, simulated):
     _accurate(result, truth)
 
 
+@pytest.fixture(scope="module")
+def side_faces():
+    """Nominal MRB35, the side-face layout (lateral run: E, F on the +x face, G, H on the -x face)."""
+    return simulate("MRB35", config=SimulationConfig(hits=2, record_s=0.02, sensor_layout="side"), seed=3)
+
+
+@pytest.mark.parametrize("flipped", [("acc_G_x", "acc_H_x"), ("acc_E_x", "acc_H_x")])
+def test_two_flipped_side_sensors_are_the_ones_physics_allows(tmp_path, side_faces, flipped):
+    """Was: G and H declared along -x (their samples along +x) gave f_H = 1879 Hz (the yaw mode
+    labelled roll_low), K_H -43 %, exit 0: flipping E and H back fits rigid motion as well as G and H
+    (it trades u for psi), and the pair search took the first. Equivalent pairs are now told apart
+    as single channels are, by the driving-point sign and the modal mass."""
+    data, truth = side_faces
+    runs = []
+    for run in data.runs:
+        dirs = np.array(run.directions, float)
+        for name in flipped:
+            if name in run.channel_names:
+                dirs[run.channel_names.index(name)] *= -1
+        runs.append(replace(run, directions=dirs))
+    result, _ = _identify(tmp_path, replace(data, runs=tuple(runs)))
+    assert {f.channel for f in result.sensor_faults} == set(flipped)
+    assert result.parameters["f_H"]["value"] == pytest.approx(truth["parameters"]["f_H"]["value"], rel=1e-3)
+    assert result.parameters["K_H"]["value"] == pytest.approx(truth["parameters"]["K_H"]["value"], rel=2e-3)
+
+
 def test_corrected_channel_gives_the_clean_file_numbers_jackknife_included(tmp_path, simulated):
     """The refit runs on the FRFs with the x1000 channel divided out, group sums too: f, zeta and their
     jackknife std are those of the clean recording (to rounding), not merely close to the truth."""
