@@ -173,7 +173,8 @@ class HitSettings:
         Length of every record (pretrigger included). Default for ``signals``:
         the shortest spacing between triggers (ignoring spacings below half the
         median, which are double hits), at most ``max_record_length_s``, and
-        shortened to fit the last hit when at least half of it fits; for
+        shortened to fit the last hit when at least half of it fits (a single
+        hit: the rest of the signal after its pretrigger); for
         ``hits``: the stored length. A set value is never changed: records
         that do not fit are rejected.
     max_record_length_s : float
@@ -820,7 +821,7 @@ def _signal_hits_read(run: Run, s: HitSettings, chunk: int, reader) -> Iterator[
             regular = gaps[gaps >= 0.5 * np.median(gaps)]
             length = min(length, int(regular.min()))
         available = n - (triggers[-1] - pre)
-        if length / 2 <= available < length:
+        if (length / 2 <= available or not gaps.size) and available < length:  # one hit: the rest of the signal
             length = available
     length = max(length, pre + 1)
     finite_peaks = [abs(p) for p in peaks if math.isfinite(p)]

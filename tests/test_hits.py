@@ -928,3 +928,21 @@ def test_rows_from_raw_is_the_plain_conversion_and_its_extremes(n, dtype):
             np.testing.assert_array_equal(rows, want)
             np.testing.assert_array_equal(tops, want.max(axis=1))
             np.testing.assert_array_equal(bottoms, want.min(axis=1))
+
+
+def test_a_signal_holding_one_hit_gives_it_the_rest_of_the_signal(tmp_path):
+    """Was: a 0.03 s signals-layout run with one hit (no spacing between hits) asked for the 0.5 s
+    cap: "incomplete: the record would end ... samples after the signal", no run gave an FRF, exit 1."""
+    from dataclasses import replace
+
+    from guidefit.identify import IdentifySettings, identify
+    from guidefit.io import write_recording
+    from guidefit.simulate import DEFAULT_RUNS, SimulationConfig, simulate
+
+    config = replace(SimulationConfig(), runs=(DEFAULT_RUNS[0],), hits=1, record_s=0.03, layout="signals",
+                     sensor_layout="default")
+    data, truth = simulate("MRB35", config=config, seed=4)
+    write_recording(tmp_path / "one.h5", data)
+    result = identify(tmp_path / "one.h5", settings=IdentifySettings(jackknife=False))
+    assert [h["accepted"] for h in result.hit_rows()] == [True]
+    assert result.parameters["K_V"]["value"] == pytest.approx(truth["parameters"]["K_V"]["value"], rel=2e-3)
