@@ -289,7 +289,7 @@ def evidence(measured: list[Measured], runs: dict, model, predicted: list[dict] 
     names = list(runs)
     n, n_model = len(measured), len(predicted)
     phi = np.asarray(model.shapes)[:5]
-    run_factors = _run_factors(measured, runs, phi)
+    run_factors = _run_factors(measured, runs, phi, np.asarray(model.frequencies_hz, float)[:phi.shape[1]])
     if run_factors:  # each run at its own scale: one run's force or sensitivities off by a unit factor
         measured = [Measured(x.frequency_hz, {r: np.asarray(c, float) / run_factors.get(r, 1.0)
                                               for r, c in x.constants.items()}) for x in measured]
@@ -333,9 +333,21 @@ def evidence(measured: list[Measured], runs: dict, model, predicted: list[dict] 
     return Evidence(rho, raw / common, shape_cost, freq_cost, visible_modes(predicted), common, run_factors)
 
 
-def _run_scale(constants: list, run, phi: np.ndarray) -> float | None:
+#: a mode whose modal constants in a run are below this fraction of the run's strongest has no say in its scale
+SCALE_STRONG = 0.1
+#: model modes whose MAC with a measured mode is this close to the best are told apart by frequency
+SCALE_MAC_TIE = 0.02
+
+
+def _run_scale(constants: list, run, phi: np.ndarray, freqs=None, model_freqs=None) -> float | None:
     """The median scale of a run's well-fitting modes (MAC >= :data:`SCALE_MAC` with a model mode through
-    the run's own sensors and hit) against the model's predicted constants; None when it has none."""
+    the run's own sensors and hit, modal constants at least :data:`SCALE_STRONG` of the run's strongest)
+    against the model's predicted constants; None when it has none.
+
+    A mode the run's hammer does not excite still has constants in it (the shared poles of the global
+    fit give every run every mode): noise, 1000x below the run's own modes, which can fit a one-mode
+    pattern by chance; before this floor such modes outvoted a run's one real mode (a vertical hit at
+    the top centre excites only the vertical mode: its run's scale came out 0.0002)."""
     if run.drive is None:
         return None
     R = (phi.T @ run.sensors.T) * (run.drive @ phi)[:, None]  # (model modes, channels)
@@ -343,19 +355,23 @@ def _run_scale(constants: list, run, phi: np.ndarray) -> float | None:
     rr = np.einsum("ij,ij->i", R, R)
     seen = rr > 1e-6 * float(rr.max(initial=0.0))  # model modes this run's hit and sensors show at all
     values = []
-    for m in constants:
+    top = max((float(m @ m) for m in constants), default=0.0)
+    for j, m in enumerate(constants):
         mm = float(m @ m)
-        if mm <= 0 or not np.any(seen):
-            continue
+        if mm <= 0 or not np.any(seen) or mm < SCALE_STRONG**2 * top:
+            continue  # a mode this run barely shows (noise through shared poles) has no say in its scale
         mr = R @ m
         mac = np.where(seen, mr**2 / (np.where(seen, rr, 1.0) * mm), 0.0)
         i = int(np.argmax(mac))
+        tied = np.flatnonzero(mac >= mac[i] - SCALE_MAC_TIE)
+        if tied.size > 1 and freqs is not None and model_freqs is not None:  # one sensor: every MAC is 1
+            i = int(tied[np.argmin(np.abs(np.log(np.asarray(model_freqs, float)[tied] / freqs[j])))])
         if mac[i] >= SCALE_MAC:
             values.append(mr[i] / rr[i])
     return float(np.median(values)) if values else None
 
 
-def _run_factors(measured: list[Measured], runs: dict, phi: np.ndarray) -> dict:
+def _run_factors(measured: list[Measured], runs: dict, phi: np.ndarray, model_freqs=None) -> dict:
     """Runs whose modal constants are more than :data:`COMMON_SCALE_FACTOR` times the others', or of the
     opposite sign (a force or sensitivity calibration of one run off by a unit factor, or its hammer or
     every accelerometer reversed: every mode of the run scaled alike), as {run: factor against the run
@@ -367,8 +383,10 @@ def _run_factors(measured: list[Measured], runs: dict, phi: np.ndarray) -> dict:
     """
     scales = {}
     for name, run in runs.items():
-        constants = [np.asarray(x.constants[name], float) for x in measured if name in x.constants]
-        scale = _run_scale(constants, run, phi)
+        mine = [x for x in measured if name in x.constants]
+        constants = [np.asarray(x.constants[name], float) for x in mine]
+        freqs = np.array([float(x.frequency_hz) for x in mine])
+        scale = _run_scale(constants, run, phi, freqs, model_freqs)
         if scale is not None and scale != 0:
             scales[name] = scale
     if len(scales) < 2:
