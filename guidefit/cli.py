@@ -714,6 +714,10 @@ def explain_cmd(recording, modes_path, guide_name, candidates, as_json, plot_pat
         click.echo(report.dump_json(result.to_dict()))
     else:
         report.render_explanation(result)
+    if ident is not None and ident.unidentified:  # explained on the modes found; a joint mode is missing
+        for line in ident.unidentified:
+            click.echo(f"guidefit: identification incomplete: {recording}: {line}", err=True)
+        sys.exit(1)
 
 
 def _id_list(text: str | None, option: str):

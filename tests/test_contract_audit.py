@@ -551,3 +551,13 @@ def test_html_report_lists_the_hits_of_a_run_without_frf(tmp_path):
     code, _, err = cli("report", path, "-o", str(out))
     assert code == 0, err
     assert "3 accepted, 3 rejected" in out.read_text()
+
+
+def test_explain_on_an_incomplete_identification_says_so_and_exits_1(tmp_path):
+    """Was: identify exit 1 ('identification incomplete': the vertical run gave no FRF) while explain on the
+    same file gave its verdict on the modes it had ('adequate') with exit 0 and no word of the missing mode."""
+    path = _all_hits_rejected_in_vertical(tmp_path)
+    code, out, err = cli("explain", path, "--candidates", "added_mass")
+    assert code == 1, err
+    assert "identification incomplete" in err and "f_V, K_V, c_V not identified" in err
+    assert out.strip()  # the explanation of the modes found is still shown
