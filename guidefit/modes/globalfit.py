@@ -472,7 +472,8 @@ class GlobalFit:
         Per mode: ``fit``, ``jackknife`` and ``selection`` std of ``f`` (Hz)
         and ``zeta``.
     excluded_runs : tuple of str
-        Runs on another frequency grid (fitted on their own only).
+        Runs on another frequency grid (another record length or sample rate): left out of the fit,
+        not fitted at all (identify warns; their modes come from the other runs or are missing).
     nrmse : float
         Normalised RMS misfit of the fit.
     """
