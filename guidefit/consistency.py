@@ -159,10 +159,13 @@ class SensorFault:
     alternatives: tuple
     relres_before: float
     relres_after: float
+    note: str = ""  # the whole warning, when the fault was found another way (guidefit.sensor_signs)
 
     @property
     def message(self) -> str:
         """One line for the warnings: channel, likely fault and its size."""
+        if self.note:
+            return self.note
         who = " or ".join((self.channel, *self.alternatives))
         if self.kind == "axis":
             size = "" if abs(abs(self.factor) - 1) < 0.2 else f", {_num(abs(self.factor))}x"
@@ -785,6 +788,7 @@ class SensorCheck:
     faults: tuple
     sets: list
     warnings: tuple
+    unresolved: str | None = None  # a sign fault the check found but cannot place (identify: exit 1)
 
 
 def hit_points_of(recording) -> dict:
@@ -795,7 +799,7 @@ def hit_points_of(recording) -> dict:
 # --------------------------------------------------------------------------- the global modal stage's glue
 
 
-def check_global(runs, recording, guide, settings, faults=None) -> SensorCheck:
+def check_global(runs, recording, guide, settings, faults=None, model=None) -> SensorCheck:
     """Faulty channels in the global fit's shapes (each run's view of the shared modes).
 
     ``runs`` are identify's RunResults whose ``modes`` are the run's views of
@@ -803,17 +807,26 @@ def check_global(runs, recording, guide, settings, faults=None) -> SensorCheck:
     given (the FRFs already corrected for them), only the shape sets are made
     again for the gate. The correction itself is a step of the identify
     pipeline (:func:`guidefit.identify.corrected_frfs`): the FRFs corrected,
-    the global fit made again.
+    the global fit made again. When no channel breaks the rigid fit, the runs
+    are checked against each other for reversed sets of channels a run's own
+    rigid fit cannot see (:func:`guidefit.sensor_signs.sign_faults`, with
+    ``model``, the guide's nominal modes); a set it cannot place is
+    ``unresolved``.
     """
     from guidefit.model import vibration as vib
+    from guidefit.sensor_signs import sign_faults
 
     hit_points = hit_points_of(recording)
     band = (getattr(settings, "f_min_hz", None), getattr(settings, "f_max_hz", None))
     modes = [m for r in runs for m in r.modes]
     sets = shape_sets(runs, modes, hit_points, band)
+    unresolved = None
     if faults is None:
         faults = find_sensor_faults(sets, vib.carriage_mass_matrix(vib.model_from_guide(guide)))
-    return SensorCheck(tuple(faults), sets, tuple(f.message for f in faults))
+        if not faults and model is not None:
+            signs = sign_faults(sets, model)
+            faults, unresolved = signs.faults, signs.unresolved
+    return SensorCheck(tuple(faults), sets, tuple(dict.fromkeys(f.message for f in faults)), unresolved)
 
 
 def global_mass_warnings(runs, sets: list[ShapeSet], guide, model) -> list[str]:

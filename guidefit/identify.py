@@ -611,7 +611,7 @@ def sensor_check(fit: ModalFit, recording, guide, model, settings: IdentifySetti
     """
     from guidefit import consistency
 
-    check = consistency.check_global(fit.passed.runs, recording, guide, settings)
+    check = consistency.check_global(fit.passed.runs, recording, guide, settings, model=model)
     if not check.faults:
         return replace(fit, check=check)
     collected = corrected_frfs(fit.collected, check.faults, settings, recompute)
@@ -677,7 +677,7 @@ def conclude(path, recording, guide, model, settings: IdentifySettings, fit: Mod
     params = joint_parameters(guide.mass_kg, joint)
     # modes that are found but not named (ambiguous) count as missing for the gate
     not_named = [lab for lab in model.labels if lab not in {m.label for m in modes} and not lab.startswith("support")]
-    gate = consistency.plausibility(modes, not_named, sets, model)
+    gate = fit.check.unresolved or consistency.plausibility(modes, not_named, sets, model)
     if gate is None and neither:  # modes found, none of them the vertical or the horizontal joint mode
         gate = (f"neither the vertical nor the horizontal joint mode was found among the {len(res.modes)} "
                 f"labelled and {len(res.extras)} other modes: the recording does not look like a carriage on "

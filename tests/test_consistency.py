@@ -221,6 +221,70 @@ def test_two_flipped_side_sensors_are_the_ones_physics_allows(tmp_path, side_fac
     assert result.parameters["K_H"]["value"] == pytest.approx(truth["parameters"]["K_H"]["value"], rel=2e-3)
 
 
+@pytest.mark.parametrize("flipped, how", [(("acc_E_x", "acc_G_x"), "samples"), (("acc_E_x", "acc_G_x"), "declared"),
+                                          (("acc_F_x", "acc_H_x"), "samples")])
+def test_side_sensors_reversed_at_one_height_are_found_by_the_other_run(tmp_path, side_faces, flipped, how):
+    """Was: E and G (one height, opposite faces) reversed, in their samples or their declared direction,
+    still read a rigid motion (u and psi trade places), so the sensor check was silent: yaw labelled
+    roll_low, f_H = 1879 Hz, K_H -43 %, c_H -86 %, exit 0, beside a warning 'run lateral: -4.79 times the
+    other runs'. The lateral run's negative scale (F, H: 4.79x, and its 2497 Hz mode read as yaw where
+    the vertical run reads roll) now tries the sign sets its rigid fit cannot see: the pair is named and
+    corrected, K_H as on the clean file."""
+    data, truth = side_faces
+    runs = []
+    for run in data.runs:
+        dirs, d = np.array(run.directions, float), np.array(run.data, float)
+        for name in flipped:
+            if name in run.channel_names:
+                j = run.channel_names.index(name)
+                if how == "declared":
+                    dirs[j] *= -1
+                else:
+                    d[..., j] *= -1
+        runs.append(replace(run, directions=dirs, data=d))
+    result, _ = _identify(tmp_path, replace(data, runs=tuple(runs)))
+    assert {f.channel for f in result.sensor_faults} == set(flipped)
+    assert "sign reversed together" in result.sensor_faults[0].message
+    assert result.gate is None
+    for key in ("f_H", "K_H", "c_H"):
+        assert result.parameters[key]["value"] == pytest.approx(truth["parameters"][key]["value"], rel=5e-3), key
+
+
+def test_sign_sets_a_run_cannot_see_and_an_undecided_one():
+    """The side-face x sensors at two heights: reversing both at one height keeps every rigid reading
+    rigid; A-D y sensors (a twist constraint) have no such set. A run read at a negative scale whose
+    candidate sets do not make it agree with the other run is named, not corrected."""
+    from guidefit.model import vibration as vib
+    from guidefit.model.guides import load_guide
+    from guidefit.sensor_signs import SignCheck, sign_faults, undetectable_flips
+
+    z = [0.04, -0.04, 0.04, -0.04]
+    side = np.array([[1.0, 0.0, 0.0, zi, 0.015] for zi in z])
+    assert undetectable_flips(side) == [(0, 2), (1, 3)]
+    ys = np.array([[0.0, 1.0, -zz, 0.0, xx] for xx, zz in ((0.03, 0.045), (-0.03, 0.045), (-0.03, -0.045),
+                                                              (0.03, -0.045))])
+    assert undetectable_flips(ys) == []
+    model = vib.solve_modes(vib.model_from_guide(load_guide("MRB35")))
+    phi = np.asarray(model.shapes)[:5]
+    g_v, g_l = driving_row((0, -1.0, 0), (0.004, 0, 0.008)), driving_row((-1.0, 0, 0), (0.05, -0.012, 0.006))
+    f = tuple(model.frequencies_hz)
+
+    def shape_set(run, S, g, sign):
+        shapes = (phi.T @ S.T) * (g @ phi)[:, None] * sign
+        return cons.ShapeSet(run, tuple(f"acc_{i}" for i in range(len(S))), S, np.zeros((len(S), 3)),
+                             np.zeros((len(S), 3)), shapes, g, tuple(model.labels), f)
+
+    good = [shape_set("vertical", ys, g_v, 1.0), shape_set("lateral", side, g_l, 1.0)]
+    assert sign_faults(good, model).faults == () and sign_faults(good, model).unresolved is None
+    eg = [good[0], shape_set("lateral", side, g_l, np.array([-1.0, 1.0, -1.0, 1.0]))]
+    assert {x.channel for x in sign_faults(eg, model).faults} == {"acc_0", "acc_2"}
+    for factor in (-1.0, -10.0):  # the hammer reversed (and a unit error): the labeller reads the run at its sign
+        assert sign_faults([good[0], shape_set("lateral", side, g_l, factor)], model) == SignCheck()
+    undecided = sign_faults([good[0], shape_set("lateral", side, g_l, np.array([-10.0, 10.0, -10.0, 10.0]))], model)
+    assert undecided.faults == ()
+    assert "acc_0+acc_2 or acc_1+acc_3" in undecided.unresolved and "run 'lateral'" in undecided.unresolved
+
+
 def test_corrected_channel_gives_the_clean_file_numbers_jackknife_included(tmp_path, simulated):
     """The refit runs on the FRFs with the x1000 channel divided out, group sums too: f, zeta and their
     jackknife std are those of the clean recording (to rounding), not merely close to the truth."""

@@ -339,7 +339,7 @@ SCALE_STRONG = 0.1
 SCALE_MAC_TIE = 0.02
 
 
-def _run_scale(constants: list, run, phi: np.ndarray, freqs=None, model_freqs=None) -> float | None:
+def run_scale(constants: list, run, phi: np.ndarray, freqs=None, model_freqs=None) -> float | None:
     """The median scale of a run's well-fitting modes (MAC >= :data:`SCALE_MAC` with a model mode through
     the run's own sensors and hit, modal constants at least :data:`SCALE_STRONG` of the run's strongest)
     against the model's predicted constants; None when it has none.
@@ -378,7 +378,7 @@ def _run_factors(measured: list[Measured], runs: dict, phi: np.ndarray, model_fr
     nearest the model's scale}; {} when the runs agree (or only one has a scale).
 
     Each run's scale is the median over its well-fitting modes of the driving-point scale against the model
-    through its own sensors (:func:`_run_scale`); without this a run 1000 times the others would make the
+    through its own sensors (:func:`run_scale`); without this a run 1000 times the others would make the
     modes it does not see look 1000 times too weak to be the carriage's.
     """
     scales = {}
@@ -386,7 +386,7 @@ def _run_factors(measured: list[Measured], runs: dict, phi: np.ndarray, model_fr
         mine = [x for x in measured if name in x.constants]
         constants = [np.asarray(x.constants[name], float) for x in mine]
         freqs = np.array([float(x.frequency_hz) for x in mine])
-        scale = _run_scale(constants, run, phi, freqs, model_freqs)
+        scale = run_scale(constants, run, phi, freqs, model_freqs)
         if scale is not None and scale != 0:
             scales[name] = scale
     if len(scales) < 2:
