@@ -221,7 +221,7 @@ def _faults(s, sub, scale: float, ref: float, disagree: list, model) -> tuple:
     after = _scale(replace(s, shapes=s.shapes * d), model)
     note = (f"{' and '.join(names)}: sign reversed together (mounted upside down, or declared along the "
             f"opposite axis?): {_why(s, scale, ref, disagree, model)}; its own rigid fit cannot see these "
-            f"reversed together, and with them reversed back it agrees with the others ({after / ref:.3g} times "
+            f"reversed together, and with them reversed back it agrees with the others ({after / ref:.2f} times "
             "their modal constants); modes fitted with them corrected")
     return tuple(SensorFault(n, "scale", -1.0, None, (), 0.0, 0.0, note) for n in names)
 

@@ -509,3 +509,67 @@ def test_mat_every_rate_and_time_variable_must_agree(tmp_path, version, variable
     _write_mat(tmp_path / "x.mat", version, {"data": np.ones((300, 2)), **variables})
     with pytest.raises(ValueError, match="^x.mat: " + message):
         open_daq(tmp_path / "x.mat", "x.mat", RunOptions("t.toml: runs.a"))
+
+
+@pytest.fixture(scope="module")
+def default_layout_setup(tmp_path_factory):
+    """The default layout (vertical run: y at A-D; lateral run: x at A-D) as MAT files in SI, and a
+    function that writes a setup with some runs' excitation_direction replaced and identifies it."""
+    import scipy.io
+
+    from guidefit.identify import identify
+
+    config = replace(SimulationConfig(), sensor_layout="default", hits=3, record_s=0.04, layout="signals",
+                     gap_s=0.005)
+    data, truth = simulate("MRB35", config=config, seed=11)
+    folder = tmp_path_factory.mktemp("hammer")
+    for run in data.runs:
+        scipy.io.savemat(folder / f"{run.name}.mat", {**{n: np.asarray(run.data[:, k], float)
+                                                         for k, n in enumerate(run.channel_names)},
+                                                      "fs": run.sample_rate_hz})
+
+    def identify_with(name: str, directions: dict):
+        lines = ['format = "guidefit-setup"', "format_version = 1", 'guide = "MRB35"']
+        for ch in dict.fromkeys(n for r in data.runs for n in r.channel_names):
+            lines += [f"[channels.{ch}]", f'source = "{ch}"', f'unit = "{"N" if ch == "force" else "m/s^2"}"']
+        for run in data.runs:
+            lines += [f"[runs.{run.name}]", f'file = "{run.name}.mat"',
+                      f"excitation_direction = {json.dumps(directions.get(run.name, run.excitation_direction.tolist()))}",
+                      f"excitation_position_m = {json.dumps(run.excitation_position_m.tolist())}"]
+        (folder / f"{name}.toml").write_text("\n".join(lines) + "\n")
+        return identify(folder / f"{name}.toml"), folder / f"{name}.toml"
+
+    return identify_with, truth
+
+
+@pytest.mark.parametrize("direction", [[-1.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+def test_setup_with_the_hammer_along_the_wrong_axis_is_incomplete_and_says_so(default_layout_setup, direction):
+    """Was: the vertical run declared along x (a hit along x drives no vertical mode) gave K_V null
+    with exit 0: its vertical and pitch modes were 'extra' and the vertical mode 'not excited on this
+    layout'. Its strong modes are modes a hit along x cannot excite: the hammer direction is named,
+    f_V, K_V, c_V 'not identified', exit 1; K_H as before."""
+    from click.testing import CliRunner
+
+    from guidefit.cli import main
+
+    identify_with, truth = default_layout_setup
+    result, path = identify_with("vertical_x", {"vertical": direction})
+    assert result.parameters["K_V"]["value"] is None
+    (line,) = [u for u in result.unidentified if u.startswith("f_V")]
+    assert "runs.vertical.excitation_direction in vertical_x.toml" in line and "3529 Hz (vertical)" in line
+    assert result.parameters["K_H"]["value"] == pytest.approx(truth["parameters"]["K_H"]["value"], rel=5e-3)
+    out = CliRunner().invoke(main, ["identify", str(path)])
+    assert out.exit_code == 1
+    assert "identification incomplete" in out.output and "hammer direction may be entered wrong" in out.output
+
+
+def test_setup_with_the_hammer_sign_reversed_keeps_k_and_names_it(default_layout_setup):
+    """A vertical hit entered as +y (it was -y): every modal constant of the run reversed, no mode's drive
+    changed; the labeller reads the run at its own sign, K and c do not depend on it, and a warning names
+    the reversed excitation_direction."""
+    identify_with, truth = default_layout_setup
+    result, _ = identify_with("vertical_up", {"vertical": [0.0, 1.0, 0.0]})
+    assert result.unidentified == () and result.gate is None
+    for key in ("K_V", "K_H"):
+        assert result.parameters[key]["value"] == pytest.approx(truth["parameters"][key]["value"], rel=5e-3)
+    assert any("run 'vertical'" in w and "excitation_direction" in w and "reversed" in w for w in result.warnings)
