@@ -825,7 +825,8 @@ def check_global(runs, recording, guide, settings, faults=None, model=None) -> S
         faults = find_sensor_faults(sets, vib.carriage_mass_matrix(vib.model_from_guide(guide)))
         if not faults and model is not None:
             signs = sign_faults(sets, model)
-            faults, unresolved = signs.faults, signs.unresolved
+            faults = tuple(SensorFault(n, "scale", -1.0, None, (), 0.0, 0.0, note) for n, note in signs.faults)
+            unresolved = signs.unresolved
     return SensorCheck(tuple(faults), sets, tuple(dict.fromkeys(f.message for f in faults)), unresolved)
 
 

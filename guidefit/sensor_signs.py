@@ -52,7 +52,8 @@ MATCH_STRONG = 0.01
 
 @dataclass(frozen=True)
 class SignCheck:
-    """What :func:`sign_faults` found: faults to correct (SensorFault, factor -1), or a line why it
+    """What :func:`sign_faults` found: channels to correct by a factor -1, as ``(channel, warning)``
+    pairs (:func:`guidefit.consistency.check_global` makes them SensorFaults), or a line why it
     cannot decide (``unresolved``), or neither."""
 
     faults: tuple = ()
@@ -213,8 +214,6 @@ def _why(s, scale: float, ref: float, disagree: list, model) -> str:
 
 
 def _faults(s, sub, scale: float, ref: float, disagree: list, model) -> tuple:
-    from guidefit.consistency import SensorFault
-
     names = [s.channels[i] for i in sub]
     d = np.ones(len(s.channels))
     d[list(sub)] = -1.0
@@ -223,7 +222,7 @@ def _faults(s, sub, scale: float, ref: float, disagree: list, model) -> tuple:
             f"opposite axis?): {_why(s, scale, ref, disagree, model)}; its own rigid fit cannot see these "
             f"reversed together, and with them reversed back it agrees with the others ({after / ref:.2f} times "
             "their modal constants); modes fitted with them corrected")
-    return tuple(SensorFault(n, "scale", -1.0, None, (), 0.0, 0.0, note) for n in names)
+    return tuple((n, note) for n in names)
 
 
 def _unresolved(s, flips, scale: float, ref: float, disagree: list, model, several: bool = False) -> str:

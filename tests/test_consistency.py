@@ -277,7 +277,7 @@ def test_sign_sets_a_run_cannot_see_and_an_undecided_one():
     good = [shape_set("vertical", ys, g_v, 1.0), shape_set("lateral", side, g_l, 1.0)]
     assert sign_faults(good, model).faults == () and sign_faults(good, model).unresolved is None
     eg = [good[0], shape_set("lateral", side, g_l, np.array([-1.0, 1.0, -1.0, 1.0]))]
-    assert {x.channel for x in sign_faults(eg, model).faults} == {"acc_0", "acc_2"}
+    assert {channel for channel, _ in sign_faults(eg, model).faults} == {"acc_0", "acc_2"}
     for factor in (-1.0, -10.0):  # the hammer reversed (and a unit error): the labeller reads the run at its sign
         assert sign_faults([good[0], shape_set("lateral", side, g_l, factor)], model) == SignCheck()
     undecided = sign_faults([good[0], shape_set("lateral", side, g_l, np.array([-10.0, 10.0, -10.0, 10.0]))], model)

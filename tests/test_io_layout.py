@@ -356,7 +356,7 @@ LAYERS = (
     ("modes", ("guidefit.modes",)),
     ("simulate", ("guidefit.simulate",)),
     ("identify", ("guidefit.identify", "guidefit.identify_runs", "guidefit.modal_stage", "guidefit.consistency",
-                  "guidefit.plan", "guidefit.predict")),
+                  "guidefit.sensor_signs", "guidefit.hammer_check", "guidefit.plan", "guidefit.predict")),
     ("explain", ("guidefit.nonlinear", "guidefit.explain")),
     ("products", ("guidefit.report", "guidefit.export", "guidefit.machine")),
     ("command", ("guidefit.cli", "guidefit.__main__")),
