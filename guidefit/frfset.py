@@ -161,6 +161,10 @@ class FrfSet:
     fft_precision : str
         ``"single"`` (float32 FFTs, float64 sums) or ``"double"``; see
         "Precision" in the module docstring.
+    n_fft : int or None
+        FFT length when the windowed records were zero-padded to put the run on
+        a common frequency grid with other runs ("Common grid" in
+        :mod:`guidefit.frf`); None: the records' own length.
     """
 
     run: str
@@ -177,6 +181,7 @@ class FrfSet:
     trigger_s: float | None = None
     sample_rate_hz: float | None = None
     fft_precision: str = "double"
+    n_fft: int | None = None
 
     @property
     def n_groups(self) -> int:

@@ -468,7 +468,7 @@ def _bin_frf(run, rr, wanted: set, whole: bool):
         raise IdentificationError(f"run '{run.name}': no accepted hit in the force bin")
     if not whole:
         frf = frf_mod.compute_frf(run, hits, estimator=frf.estimator, window=window_settings_of(frf), workers=1,
-                                  max_frequency_hz=frf_mod.top_of(frf))
+                                  max_frequency_hz=frf_mod.top_of(frf), n_fft=frf.n_fft)
     return frf, float(np.median(pulses)), shape
 
 
