@@ -355,7 +355,9 @@ def write_frf_h5(path, frfsets, include_group_sums: bool = True) -> None:
     columns of H), ``n_averages``, ``exp_window_tau_s``, ``force_window_s``,
     ``force_taper_s``, ``trigger_s``, ``sample_rate_hz`` (NaN where not
     applicable, e.g. no exponential window), ``fft_precision`` (absent in
-    files written before it existed: read as ``"double"``).
+    files written before it existed: read as ``"double"``), and ``n_fft``
+    only for a run whose windowed records were zero-padded to that FFT length
+    (a common frequency grid with longer runs, :func:`guidefit.frf.common_grid`).
 
     Parameters
     ----------
@@ -401,6 +403,8 @@ def write_frf_h5(path, frfsets, include_group_sums: bool = True) -> None:
             for key in ("exp_window_tau_s", "force_window_s", "force_taper_s", "trigger_s",
                         "sample_rate_hz"):
                 g.attrs[key] = _nan_if_none(getattr(frf, key))
+            if frf.n_fft is not None:
+                g.attrs["n_fft"] = int(frf.n_fft)
             if include_group_sums and frf.group_sums:
                 s = g.create_group("group_sums")
                 for key in ("Sff", "Sxx", "Sfx", "n_hits"):
@@ -687,7 +691,8 @@ def _read_h5_frfset(display: str, root, name: str):
                  force_window_s=_optional_seconds(a, "force_window_s", where),
                  force_taper_s=_optional_float(a, "force_taper_s", where),
                  trigger_s=_optional_float(a, "trigger_s", where),
-                 sample_rate_hz=rate, fft_precision=_text(a.get("fft_precision")) or "double")
+                 sample_rate_hz=rate, fft_precision=_text(a.get("fft_precision")) or "double",
+                 n_fft=_count(a["n_fft"], f"{where}: n_fft") if "n_fft" in a else None)
     return frf, notes
 
 
