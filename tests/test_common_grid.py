@@ -90,7 +90,8 @@ def test_zero_padding_samples_the_same_spectrum_on_a_finer_grid():
     hits = _decaying_hits(n, fs)
     own = compute_frf(run, hits, window=WindowSettings(), workers=1)
     padded = compute_frf(run, hits, window=WindowSettings(), workers=1, n_fft=2 * n)
-    assert own.n_fft is None and padded.n_fft == 2 * n
+    assert own.n_fft is None and padded.n_fft == 2 * n and padded.record_samples == n
+    assert padded.resolution_hz == pytest.approx(own.resolution_hz)  # finer bins, not a finer resolution
     assert padded.frequency_hz[1] == pytest.approx(own.frequency_hz[1] / 2)
     # every second bin of the padded FFT is a bin of the record's own FFT: the same spectrum, the same FRF
     np.testing.assert_allclose(padded.H[::2], own.H, rtol=1e-9, atol=1e-12 * np.abs(own.H).max())
@@ -136,3 +137,16 @@ def test_first_bins_cuts_every_array_of_an_frfset():
     assert cut.frequency_hz.size == cut.H.shape[0] == cut.coherence.shape[0] == 100
     assert cut.group_sums["Sff"].shape[1] == cut.group_sums["Sfx"].shape[1] == 100
     np.testing.assert_array_equal(cut.H, frf.H[:100])
+
+
+def test_frf_h5_keeps_the_record_length_of_zero_padded_frfs(tmp_path):
+    from guidefit.frf import read_frf_h5, write_frf_h5
+
+    fs, n = 8000.0, 800
+    run = NS(name="r", sample_rate_hz=fs, force_index=0, pretrigger_samples=8,
+             channels=(NS(name="force"), NS(name="acc_A_y")))
+    padded = compute_frf(run, _decaying_hits(n, fs), workers=1, n_fft=4 * n)
+    write_frf_h5(tmp_path / "frf.h5", [padded])
+    back, = read_frf_h5(tmp_path / "frf.h5")
+    assert (back.record_samples, back.n_fft) == (n, 4 * n)
+    assert back.resolution_hz == pytest.approx(fs / n)

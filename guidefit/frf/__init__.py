@@ -335,7 +335,7 @@ def compute_frf(
     n_fft : int, optional
         FFT length: every windowed record zero-padded to ``n_fft`` samples,
         bins ``fs / n_fft`` apart (see "Common grid" above; the FrfSet's
-        ``n_fft`` says so). None: the records' own length.
+        ``record_samples`` and ``n_fft`` say so). None: the records' own length.
 
     Returns
     -------
@@ -549,7 +549,7 @@ def _frf(items, sample_rate_hz, force_index, channel_names, estimator, window,
         trigger_s=choice.trigger_sample / fs,
         sample_rate_hz=fs,
         fft_precision=acc.precision,
-        n_fft=acc.n_fft if acc.n_fft != n else None,
+        record_samples=n if acc.n_fft != n else None,
     )
     return _frfset_from_sums(template, acc.group_sums(), estimator)
 
