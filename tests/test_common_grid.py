@@ -150,3 +150,19 @@ def test_frf_h5_keeps_the_record_length_of_zero_padded_frfs(tmp_path):
     back, = read_frf_h5(tmp_path / "frf.h5")
     assert (back.record_samples, back.n_fft) == (n, 4 * n)
     assert back.resolution_hz == pytest.approx(fs / n)
+
+
+def test_frfs_read_from_a_file_on_two_grids_still_leave_a_run_out_and_say_why(tmp_path):
+    """No hits to transform again: the run on the other grid is left out, with the reason."""
+    from guidefit.frf import write_frf_h5
+    from guidefit.hits import HitSettings, iter_hits
+    from guidefit.io import read_recording
+
+    path, _ = _mixed(tmp_path, dict(record_s=0.1, sample_rate_hz=200_000.0))
+    frfs = [compute_frf(r, iter_hits(r, HitSettings()), max_frequency_hz=21_700.0)
+            for r in read_recording(path).runs]
+    write_frf_h5(tmp_path / "frf.h5", frfs)
+    result = CliRunner().invoke(main, ["identify", str(tmp_path / "frf.h5"), "--json"])
+    out = json.loads(next(line for line in result.output.splitlines() if line.startswith("{")))
+    grid = [w for w in out["warnings"] if "another frequency grid" in w]
+    assert len(grid) == 1 and "FRFs read from a file" in grid[0] and "left out of the global fit" in grid[0]
