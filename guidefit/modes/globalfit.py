@@ -472,12 +472,9 @@ class GlobalFit:
         Per mode: ``fit``, ``jackknife`` and ``selection`` std of ``f`` (Hz)
         and ``zeta``.
     excluded_runs : tuple of str
-        Runs on another frequency grid than most FRF columns: left out of the fit, not fitted at all
-        (identify warns; their modes come from the other runs or are missing). Identify's FRF stage
-        puts runs recorded with other record lengths or sample rates on one grid before the fit
-        (:func:`guidefit.frf.common_grid`: windowed records zero-padded to the longest duration), so
-        only runs it cannot regrid end here: FRFs read from a file on several grids, or sample
-        rates that are not a whole number of Hz.
+        Runs on another grid than most FRF columns: not fitted (identify warns). Identify's FRF stage
+        puts runs of other record lengths or sample rates on one grid first (:func:`guidefit.frf.common_grid`,
+        zero padding); only FRF files on several grids and non-integer sample rates end here.
     nrmse : float
         Normalised RMS misfit of the fit.
     """
@@ -868,12 +865,10 @@ def global_fit(frf_by_run: dict, band_hz: tuple, *, orders: Sequence[int] = rang
     Parameters
     ----------
     frf_by_run : dict of str to guidefit.frf.FrfSet
-        Each run's FRFs (all response channels), on one frequency grid (the
-        bins of every run the same frequencies; :func:`guidefit.frf.common_grid`
-        and :func:`guidefit.identify.run_frfs` make one for runs of other
-        record lengths or sample rates). Should they differ, the runs on the
-        grid shared by most FRF columns are fitted together and the others
-        listed in ``excluded_runs``.
+        Each run's FRFs (all response channels), on one frequency grid
+        (:func:`guidefit.identify.run_frfs` makes one for runs of other record
+        lengths or sample rates). Runs off the grid of most FRF columns are
+        listed in ``excluded_runs``, not fitted.
     band_hz : (float, float)
         Band holding every mode of interest; the modes outside it are left to
         the residual terms.
