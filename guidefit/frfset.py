@@ -133,7 +133,7 @@ class FrfSet:
     run : str
         Run name.
     frequency_hz : numpy.ndarray, shape (F,)
-        Bin frequencies, ``scipy.fft.rfftfreq(n_samples, 1/fs)``.
+        Bin frequencies, ``scipy.fft.rfftfreq(n_samples, 1/fs)`` (``n_fft`` for zero-padded records).
     channels : tuple of str
         Response channel names, in the order of the columns of ``H``.
     H : numpy.ndarray, shape (F, R), complex
@@ -161,6 +161,11 @@ class FrfSet:
     fft_precision : str
         ``"single"`` (float32 FFTs, float64 sums) or ``"double"``; see
         "Precision" in the module docstring.
+    record_samples : int or None
+        The records' own length when they were zero-padded, after their
+        windows, to put the run on a common frequency grid with other runs
+        ("Common grid" in :mod:`guidefit.frf`; :attr:`n_fft` is then the
+        padded length); None: not padded.
     """
 
     run: str
@@ -177,6 +182,22 @@ class FrfSet:
     trigger_s: float | None = None
     sample_rate_hz: float | None = None
     fft_precision: str = "double"
+    record_samples: int | None = None
+
+    @property
+    def n_fft(self) -> int | None:
+        """The FFT length of zero-padded records (``fs / df``); None when the records were not padded."""
+        if self.record_samples is None:
+            return None
+        return int(round(float(self.sample_rate_hz) / float(self.frequency_hz[1] - self.frequency_hz[0])))
+
+    @property
+    def resolution_hz(self) -> float:
+        """The spectral resolution, one over the record's duration: the bin spacing, or for zero-padded
+        records (finer bins, no finer resolution) ``fs / record_samples``."""
+        if self.record_samples is not None:
+            return float(self.sample_rate_hz) / self.record_samples
+        return float(self.frequency_hz[1] - self.frequency_hz[0])
 
     @property
     def n_groups(self) -> int:

@@ -384,7 +384,8 @@ def run_frfs(recording, settings: IdentifySettings, max_frequency_hz: float | No
     Hits stream from the file into the spectral sums (bounded memory); each
     rejected hit is listed with its reason. ``max_frequency_hz``: the FRFs
     end there (:func:`guidefit.frf.compute_frf`). The hit rows of a run that
-    gives no FRF are in ``failed_rows``.
+    gives no FRF are in ``failed_rows``. Runs recorded with another record
+    length or sample rate are put on one frequency grid (:func:`_on_common_grid`).
     """
     from guidefit.errors import RecordingError
 
@@ -399,7 +400,28 @@ def run_frfs(recording, settings: IdentifySettings, max_frequency_hz: float | No
             failed.extend(rows)
         else:
             collected.append((run, frf, rows))
-    return FrfStage(tuple(collected), tuple(failed), tuple(warnings))
+    return FrfStage(_on_common_grid(tuple(collected), settings, max_frequency_hz), tuple(failed), tuple(warnings))
+
+
+def _on_common_grid(collected: tuple, settings: IdentifySettings, max_frequency_hz) -> tuple:
+    """The FRF stage's runs on one frequency grid (:func:`guidefit.frf.common_grid`), as the global fit
+    needs them: a run with shorter records (or another sample rate) has its FRFs computed again from its
+    hits with each windowed record zero-padded to the longest record's duration; a run whose FRFs reach
+    higher (a higher sample rate) is cut to the common top. Runs that share one grid already: unchanged,
+    nothing computed again."""
+    from guidefit.frf import _record_length, common_grid, first_bins
+    from guidefit.hits import HitSettings, iter_hits
+
+    plan = common_grid([frf for _, frf, _ in collected], max_frequency_hz)
+    if plan is None:
+        return collected
+    out = []
+    for (run, frf, rows), (n_fft, bins) in zip(collected, plan):
+        if n_fft != _record_length(frf):
+            top = float((bins - 0.5) * frf.sample_rate_hz / n_fft)  # between the last bin kept and the next
+            frf = _compute_frf(run, iter_hits(run, settings.hits or HitSettings()), settings, top, n_fft)
+        out.append((run, first_bins(frf, bins), rows))
+    return tuple(out)
 
 
 def _run_frf(run, settings: IdentifySettings, max_frequency_hz):
@@ -430,12 +452,13 @@ def _run_frf(run, settings: IdentifySettings, max_frequency_hz):
     return frf, rows, notes
 
 
-def _compute_frf(run, hits, settings: IdentifySettings, max_frequency_hz):
-    """:func:`guidefit.frf.compute_frf` with identify's estimator, windows and FFT precision."""
+def _compute_frf(run, hits, settings: IdentifySettings, max_frequency_hz, n_fft=None):
+    """:func:`guidefit.frf.compute_frf` with identify's estimator, windows and FFT precision (``n_fft``:
+    zero-padded to that length, a common grid)."""
     from guidefit.frf import WindowSettings, compute_frf
 
     return compute_frf(run, hits, estimator=settings.estimator, window=settings.window or WindowSettings(),
-                       precision=settings.fft_precision, max_frequency_hz=max_frequency_hz)
+                       precision=settings.fft_precision, max_frequency_hz=max_frequency_hz, n_fft=n_fft)
 
 
 def file_frfs(frf_file, settings: IdentifySettings) -> FrfStage:
@@ -541,7 +564,7 @@ def corrected_frfs(collected, faults, settings: IdentifySettings, recompute: boo
         drop = consistency.axis_fault_channels(faults, run.channels)
         if drop and recompute:
             view = RunChannels.without(run, drop)
-            frf = _compute_frf(view, view.hits(settings), settings, top_of(frf))
+            frf = _compute_frf(view, view.hits(settings), settings, top_of(frf), frf.n_fft)
         out.append((run, consistency.corrected_frf(frf, faults), rows))
     return tuple(out)
 

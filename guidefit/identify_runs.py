@@ -406,7 +406,8 @@ def _force_levels(run, frf, rows, modes, settings) -> tuple[list[dict], list[str
         hits = (h for h in iter_hits(run, settings.hits or HitSettings()) if h.index in wanted)
         try:
             sub = frf_mod.compute_frf(run, hits, estimator=settings.estimator, window=window,
-                                      precision=frf.fft_precision, max_frequency_hz=frf_mod.top_of(frf))
+                                      precision=frf.fft_precision, max_frequency_hz=frf_mod.top_of(frf),
+                                      n_fft=frf.n_fft)
         except IdentificationError as exc:
             return [], [f"run '{run.name}': force-level FRF failed ({exc})"]
         # a narrow band around each mode, the run's other modes subtracted or refitted with it: robust

@@ -365,8 +365,9 @@ def _identify_frfs(frf_by_run, geometry, guide, settings, model) -> ModalResult:
     band = global_band(model, frf_by_run, geometry, settings)
     _check_band(band, frf_by_run, geometry)
     gf = globalfit.global_fit(frf_by_run, band, jackknife=settings.jackknife)
-    excluded = tuple(f"run '{name}': its FRFs are on another frequency grid; left out of the global fit"
-                     for name in gf.excluded_runs)
+    excluded = tuple(f"run '{name}': its FRFs are on another frequency grid (FRFs read from a file, or a sample "
+                     "rate that is not a whole number of Hz: no common grid by zero padding); left out of the "
+                     "global fit" for name in gf.excluded_runs)
     per_run = globalfit.run_estimates(gf, frf_by_run)
     mass = vib.carriage_mass_matrix(spec)
     sensors = {r: sensor_matrix(geometry[r].channels) for r in gf.runs}

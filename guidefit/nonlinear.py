@@ -451,12 +451,15 @@ def _bins(rows, force_bins: int) -> list:
 
 def _bin_frf(run, rr, wanted: set, whole: bool):
     """FRF of a bin's hits with the run's windows (the run's own FRF when the bin is the run) and
-    the bin's pulse duration and (record length, pretrigger) in samples."""
+    the bin's pulse duration and (record length, pretrigger) in samples. Always on the record's own
+    grid, as the forward model of the level (:class:`LevelSetup`) makes its FRFs: a run zero-padded
+    to a common grid with other runs (``record_samples``) is transformed again without the padding."""
     from guidefit import frf as frf_mod
     from guidefit.frf.windows import window_settings_of
     from guidefit.hits import HitSettings, iter_hits
 
     frf = rr.frf
+    whole = whole and frf.record_samples is None
     pulses, hits, shape = [], [], (0, 0)
     for h in iter_hits(run, HitSettings()):
         if h.index in wanted and h.accepted:

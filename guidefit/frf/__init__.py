@@ -80,6 +80,26 @@ consumed from an iterator a few at a time and never all held.
 :attr:`FrfSet.H_std` gives the quick Bendat and Piersol random error of
 :math:`|H|` from the coherence [2]_.
 
+Common grid
+-----------
+The runs of one test are fitted together (:func:`guidefit.modes.global_fit`),
+which needs their FRFs on one frequency grid. A run recorded with a shorter
+record or at another sample rate has another bin spacing ``fs / n``; its
+FRFs are then computed with ``n_fft`` (:func:`compute_frf`): each record,
+*after* its windows, zero-padded to ``n_fft`` samples before the FFT, so that
+its bins are ``fs / n_fft`` apart, those of the longest record
+(:func:`common_grid` chooses ``n_fft`` per run). This changes no spectrum: a
+windowed record is a finite sequence, its spectrum (the DTFT) is defined at
+every frequency, and the padded FFT samples that same spectrum on a finer
+grid. It adds no information either (neighbouring bins of a padded record are
+correlated; the std of the fit is carried by the hit-group jackknife, which
+sees that). It is honest because the windows end the record on a decayed
+response: the exponential window is chosen so that the response at the
+record's end is at most ``exp_end_fraction`` of its peak, and the force
+window ends the force long before. The exponential window's shift of the
+poles (:math:`1/\tau`) depends on its time constant, not on the record or
+FFT length, so its damping correction is unchanged.
+
 Precision
 ---------
 The FFT computes in the precision the samples were stored in
@@ -192,11 +212,13 @@ __all__ = [
     "WindowSettings",
     "choose_windows",
     "coherence_from_sums",
+    "common_grid",
     "compute_frf",
     "estimate_frf",
     "exponential_window",
     "exponential_window_damping_correction",
     "fft_dtype",
+    "first_bins",
     "force_window",
     "frf_from_records",
     "jackknife_frf",
@@ -284,6 +306,7 @@ def compute_frf(
     workers: int = 2,
     precision: str = "auto",
     max_frequency_hz: float | None = None,
+    n_fft: int | None = None,
 ) -> FrfSet:
     """Averaged FRFs of every response channel of one run from its hits.
 
@@ -309,6 +332,10 @@ def compute_frf(
         those bins only: identify asks for a band a few times wider than it
         fits (:func:`guidefit.identify.frf_top_hz`). None: every bin up to
         the Nyquist frequency.
+    n_fft : int, optional
+        FFT length: every windowed record zero-padded to ``n_fft`` samples,
+        bins ``fs / n_fft`` apart (see "Common grid" above; the FrfSet's
+        ``record_samples`` and ``n_fft`` say so). None: the records' own length.
 
     Returns
     -------
@@ -320,6 +347,8 @@ def compute_frf(
         No accepted hit.
     RecordingError
         Hits of different lengths, or a channel count that differs from the run's.
+    ValueError
+        ``n_fft`` shorter than the records.
 
     Examples
     --------
@@ -360,7 +389,7 @@ def compute_frf(
     pair = 2 if stored >= PAIR_HITS_PER_GROUP * _check_groups(n_groups) else 1
     return _frf(accepted(), run.sample_rate_hz, run.force_index, names, estimator, window,
                 run.pretrigger_samples, str(run.name), n_groups, workers, len(names), rejected,
-                _precision_name(dtype), expect, pair, max_frequency_hz)
+                _precision_name(dtype), expect, pair, max_frequency_hz, n_fft)
 
 
 def kept_bins(n_samples: int, sample_rate_hz: float, max_frequency_hz: float | None) -> int:
@@ -387,9 +416,88 @@ def top_of(frf) -> float | None:
     return float(f[-1] + 0.5 * (f[1] - f[0]))
 
 
+def _record_length(frf) -> int:
+    """The FFT length behind ``frf``'s bins: ``fs / df``."""
+    f = np.asarray(frf.frequency_hz, dtype=float)
+    return int(round(float(frf.sample_rate_hz) / float(f[1] - f[0])))
+
+
+def common_grid(frfs: Sequence, max_frequency_hz: float | None = None) -> list | None:
+    """Per FrfSet, the ``(n_fft, bins)`` that put all of them on one frequency grid.
+
+    The grid is ``k / T`` for ``k = 0 .. bins - 1``: ``T`` the longest
+    record's duration (rounded up, when the sample rates differ, to the
+    first duration that is a whole number of samples at every rate), the
+    last bin at or below ``max_frequency_hz`` and every run's Nyquist
+    frequency. A run's records, windowed, are zero-padded to
+    ``n_fft = fs T`` samples ("Common grid" in the module docstring); the
+    bins of a run whose records already span ``T`` are its own, its FRFs at
+    most cut to ``bins``.
+
+    Parameters
+    ----------
+    frfs : sequence of FrfSet
+        One per run, with ``sample_rate_hz`` and at least two bins each.
+    max_frequency_hz : float, optional
+        The top the FRFs were asked for (:func:`compute_frf`).
+
+    Returns
+    -------
+    list of (int, int) or None
+        ``(n_fft, bins)`` per FrfSet, in order; None when they share one grid
+        already (nothing to do) or have no common grid by zero padding
+        (a sample rate that is not a whole number of Hz, or a run without
+        its sample rate or with fewer than two bins).
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace as NS
+    >>> import numpy as np
+    >>> short = NS(sample_rate_hz=1000.0, frequency_hz=np.arange(6) * 10.0)     # 0.1 s records
+    >>> long = NS(sample_rate_hz=1000.0, frequency_hz=np.arange(11) * 5.0)      # 0.2 s records
+    >>> common_grid([short, long], 50.0)
+    [(200, 11), (200, 11)]
+    >>> common_grid([long, long], 50.0) is None
+    True
+    """
+    keys = set()
+    for frf in frfs:
+        fs, f = getattr(frf, "sample_rate_hz", None), np.asarray(frf.frequency_hz, dtype=float)
+        if not fs or f.size < 2:
+            return None
+        keys.add((f.size, round(float(f[1] - f[0]), 9)))
+    if len(keys) <= 1:
+        return None
+    rates = [float(frf.sample_rate_hz) for frf in frfs]
+    if any(abs(r - round(r)) > 1e-9 * r for r in rates):
+        return None
+    step = 1.0 / math.gcd(*(int(round(r)) for r in rates))  # durations that are whole samples at every rate
+    longest = max(_record_length(frf) / r for frf, r in zip(frfs, rates))
+    span = math.ceil(longest / step - 1e-9) * step
+    n_fft = [int(round(r * span)) for r in rates]
+    top = min(r / 2 for r in rates)
+    if max_frequency_hz is not None:
+        top = min(top, float(max_frequency_hz))
+    bins = min(kept_bins(n, r, top) for n, r in zip(n_fft, rates))
+    return [(n, bins) for n in n_fft]
+
+
+def first_bins(frf: FrfSet, bins: int) -> FrfSet:
+    """``frf`` cut to its first ``bins`` frequency bins (its FRFs, coherence and spectral sums)."""
+    from dataclasses import replace
+
+    if bins >= len(frf.frequency_hz):
+        return frf
+    sums = {k: (v if k == "n_hits" else _readonly(np.array(np.asarray(v)[:, :bins])))
+            for k, v in frf.group_sums.items()}
+    return replace(frf, frequency_hz=_readonly(np.array(frf.frequency_hz[:bins])),
+                   H=_readonly(np.array(frf.H[:bins])), coherence=_readonly(np.array(frf.coherence[:bins])),
+                   group_sums=sums)
+
+
 def _frf(items, sample_rate_hz, force_index, channel_names, estimator, window,
          pretrigger_samples, run, n_groups, workers, n_channels, rejected, precision,
-         expect=None, pair=1, max_frequency_hz=None) -> FrfSet:
+         expect=None, pair=1, max_frequency_hz=None, n_fft=None) -> FrfSet:
     _check_estimator(estimator)
     fft_dtype(precision)  # checked before any record is read
     n_groups = _check_groups(n_groups)
@@ -416,7 +524,7 @@ def _frf(items, sample_rate_hz, force_index, channel_names, estimator, window,
     if n_bins is not None:
         n_bins(2)  # the frequency is checked before any record is read
     acc = _run_blocks(items, fi, windows, n_groups, max(1, int(workers)), force_offset=True,
-                      precision=precision, expect=expect, pair=pair, n_bins=n_bins)
+                      precision=precision, expect=expect, pair=pair, n_bins=n_bins, n_fft=n_fft)
     if acc is None:
         reasons = ", ".join(f"{r} x{k}" for r, k in sorted(rejected.items()))
         detail = f" ({sum(rejected.values())} rejected: {reasons})" if rejected else ""
@@ -428,7 +536,7 @@ def _frf(items, sample_rate_hz, force_index, channel_names, estimator, window,
 
     template = FrfSet(
         run=run,
-        frequency_hz=_readonly(scipy.fft.rfftfreq(n, 1.0 / fs)[:acc.F]),
+        frequency_hz=_readonly(scipy.fft.rfftfreq(acc.n_fft, 1.0 / fs)[:acc.F]),
         channels=tuple(names[k] for k in range(c) if k != fi),
         H=np.empty((0, 0), complex),
         coherence=np.empty((0, 0)),
@@ -441,6 +549,7 @@ def _frf(items, sample_rate_hz, force_index, channel_names, estimator, window,
         trigger_s=choice.trigger_sample / fs,
         sample_rate_hz=fs,
         fft_precision=acc.precision,
+        record_samples=n if acc.n_fft != n else None,
     )
     return _frfset_from_sums(template, acc.group_sums(), estimator)
 

@@ -103,14 +103,16 @@ class _Accumulator:
     :meth:`group_sums` exposes (G, F, R) views.
     """
 
-    def __init__(self, n_samples, n_channels, force_index, n_groups, workers, pair=1, n_bins=None):
+    def __init__(self, n_samples, n_channels, force_index, n_groups, workers, pair=1, n_bins=None, n_fft=None):
         self.n = n_samples
+        self.n_fft = n_samples if n_fft is None else int(n_fft)  # > n_samples: zero-padded FFTs
         self.c = n_channels
         self.fi = force_index
         self.n_groups = n_groups
         self.pair = pair
         self.workers = workers
-        self.F = n_samples // 2 + 1 if n_bins is None else min(n_samples // 2 + 1, n_bins)
+        every = self.n_fft // 2 + 1
+        self.F = every if n_bins is None else min(every, n_bins)
         self.resp = _response_index(force_index, n_channels)
         r = n_channels - 1
         self.sff = np.zeros((n_groups, self.F))
@@ -186,8 +188,8 @@ class _Buffers:
     the force.
     """
 
-    def __init__(self, n, c, dtype, force_index, n_groups, workers, pair=1, touch=False, n_bins=None):
-        self.key = (n, c, np.dtype(dtype), force_index, n_groups, workers, pair, n_bins)
+    def __init__(self, n, c, dtype, force_index, n_groups, workers, pair=1, touch=False, n_bins=None, n_fft=None):
+        self.key = (n, c, np.dtype(dtype), force_index, n_groups, workers, pair, n_bins, n_fft)
         self.n_first = max(1, min(_WINDOW_HITS, _WINDOW_BYTES // (8 * n * c)))
         self.block = _block_size(n, c)
         self.n_bufs = workers + 1 if workers > 1 else 1  # one being filled, one per helper, one queued
@@ -197,13 +199,13 @@ class _Buffers:
         else:  # the windows are chosen from float64 copies, then rounded into the buffers
             self.first = np.empty((self.n_first, c, n))
             self.space = np.empty((self.n_bufs * self.block, c, n), dtype=dtype)
-        self.acc = _Accumulator(n, c, force_index, n_groups, workers, pair, n_bins)
+        self.acc = _Accumulator(n, c, force_index, n_groups, workers, pair, n_bins, n_fft)
         if touch:
             for a in (self.space, self.first, self.acc.sff, self.acc.sxx, self.acc.sfx):
                 a.fill(0)
 
 
-def _early_buffers(expect, precision, force_index, n_groups, workers, pair=1, n_bins=None):
+def _early_buffers(expect, precision, force_index, n_groups, workers, pair=1, n_bins=None, n_fft=None):
     """:class:`_Buffers` for records of shape ``expect`` (n_samples, n_channels), made and
     touched by a thread of their own while the caller goes on; ``None`` when there is
     nothing to expect or no second thread. ``.result()`` waits for them."""
@@ -213,15 +215,17 @@ def _early_buffers(expect, precision, force_index, n_groups, workers, pair=1, n_
 
     n, c = (int(v) for v in expect)
     pool = ThreadPoolExecutor(max_workers=1)
+    length = _fft_length(n, n_fft)
     future = pool.submit(_Buffers, n, c, fft_dtype(precision), force_index, n_groups, workers, pair,
-                         True, None if n_bins is None else n_bins(n))
+                         True, None if n_bins is None else n_bins(length), n_fft)
     pool.shutdown(wait=False)  # the thread ends with the job
     return future
 
 
 def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windows,
                 n_groups: int, workers: int, force_offset: bool = False,
-                precision: str = "auto", expect=None, pair: int = 1, n_bins=None) -> _Accumulator | None:
+                precision: str = "auto", expect=None, pair: int = 1, n_bins=None,
+                n_fft: int | None = None) -> _Accumulator | None:
     """Window, FFT and accumulate all records, a few hits per FFT call.
 
     ``windows(first)`` gets the first (up to ``_WINDOW_HITS``) raw records as
@@ -250,14 +254,18 @@ def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windo
     by another thread while the first record is pulled (for stored hits,
     while the first pass reads the force of the hits). ``pair``: hits per
     group turn (see :data:`PAIR_HITS_PER_GROUP`). ``n_bins``: None (every bin),
-    or a function of the record length giving how many of the first bins to sum
-    (the FFT is whole either way; the bins above are not summed).
+    or a function of the FFT length giving how many of the first bins to sum
+    (the FFT is whole either way; the bins above are not summed). ``n_fft``:
+    None (an FFT of the record's length), or a longer FFT: every windowed
+    record zero-padded to ``n_fft`` samples (a finer bin spacing,
+    ``fs / n_fft``; see "Common grid" in :mod:`guidefit.frf`).
     """
     source = iter(items)
     # the early buffers are passed on, not kept here: once the first records are in them, the future
     # holding them must go, or it keeps the first records' memory alive
-    pulled = _pull_first(source, _early_buffers(expect, precision, force_index, n_groups, workers, pair, n_bins),
-                         precision, force_index, n_groups, workers, pair, n_bins)
+    pulled = _pull_first(source, _early_buffers(expect, precision, force_index, n_groups, workers, pair, n_bins,
+                                                n_fft),
+                         precision, force_index, n_groups, workers, pair, n_bins, n_fft)
     if pulled is None:
         return None
     space, first, acc, n_bufs, block = pulled
@@ -278,7 +286,7 @@ def _run_blocks(items: Iterator[tuple[str, np.ndarray]], force_index: int, windo
     return _transform_blocks(fill, bufs, acc, workers - 1)
 
 
-def _pull_first(source, early, precision, force_index, n_groups, workers, pair, n_bins):
+def _pull_first(source, early, precision, force_index, n_groups, workers, pair, n_bins, n_fft=None):
     """The first (up to ``_WINDOW_HITS``) records of ``source``, copied transposed into the memory
     of a :class:`_Buffers` (``early``'s when it fits them, else new).
 
@@ -292,11 +300,12 @@ def _pull_first(source, early, precision, force_index, n_groups, workers, pair, 
         if first is None:
             n, c = record.shape
             dtype = fft_dtype(precision, record.dtype)
-            kept = None if n_bins is None else n_bins(n)
-            key = (n, c, np.dtype(dtype), force_index, n_groups, workers, pair, kept)
+            length = _fft_length(n, n_fft)  # checked: no shorter than the records
+            kept = None if n_bins is None else n_bins(length)
+            key = (n, c, np.dtype(dtype), force_index, n_groups, workers, pair, kept, n_fft)
             mem = early.result() if early is not None else None
             if mem is None or mem.key != key:
-                mem = _Buffers(n, c, dtype, force_index, n_groups, workers, pair, n_bins=kept)
+                mem = _Buffers(n, c, dtype, force_index, n_groups, workers, pair, n_bins=kept, n_fft=n_fft)
             early = None
             n_first, block, n_bufs = mem.n_first, mem.block, mem.n_bufs
             space, first, acc = mem.space, mem.first, mem.acc
@@ -400,7 +409,7 @@ def _transform_blocks(fill, bufs, acc: _Accumulator, helpers: int) -> _Accumulat
 
     def transform(turn: int, k: int, i0: int, number: int) -> None:
         try:
-            Z = scipy.fft.rfft(bufs[turn][:k], axis=-1, workers=1)
+            Z = scipy.fft.rfft(bufs[turn][:k], n=acc.n_fft, axis=-1, workers=1)
         finally:
             free[turn].set()
         transformed[number] = (Z, i0)
@@ -493,6 +502,16 @@ def _validated(items: Iterable[tuple[str, np.ndarray]], run: str,
                 f"channels, expected {shape[0]} x {shape[1]} as hit {first_label}"
             )
         yield label, data
+
+
+def _fft_length(n_samples: int, n_fft: int | None) -> int:
+    """The FFT length of records of ``n_samples``: ``n_fft`` (zero padding), or the record's own."""
+    if n_fft is None:
+        return n_samples
+    if int(n_fft) < n_samples:
+        raise ValueError(f"n_fft={n_fft} is shorter than the records ({n_samples} samples); "
+                         "zero padding only lengthens them")
+    return int(n_fft)
 
 
 def _labelled(records) -> Iterator[tuple[str, np.ndarray]]:

@@ -355,7 +355,10 @@ def write_frf_h5(path, frfsets, include_group_sums: bool = True) -> None:
     columns of H), ``n_averages``, ``exp_window_tau_s``, ``force_window_s``,
     ``force_taper_s``, ``trigger_s``, ``sample_rate_hz`` (NaN where not
     applicable, e.g. no exponential window), ``fft_precision`` (absent in
-    files written before it existed: read as ``"double"``).
+    files written before it existed: read as ``"double"``), and
+    ``record_samples`` only for a run whose windowed records (of that many
+    samples) were zero-padded to a common frequency grid with longer runs
+    (:func:`guidefit.frf.common_grid`).
 
     Parameters
     ----------
@@ -401,6 +404,8 @@ def write_frf_h5(path, frfsets, include_group_sums: bool = True) -> None:
             for key in ("exp_window_tau_s", "force_window_s", "force_taper_s", "trigger_s",
                         "sample_rate_hz"):
                 g.attrs[key] = _nan_if_none(getattr(frf, key))
+            if frf.record_samples is not None:
+                g.attrs["record_samples"] = int(frf.record_samples)
             if include_group_sums and frf.group_sums:
                 s = g.create_group("group_sums")
                 for key in ("Sff", "Sxx", "Sfx", "n_hits"):
@@ -687,8 +692,20 @@ def _read_h5_frfset(display: str, root, name: str):
                  force_window_s=_optional_seconds(a, "force_window_s", where),
                  force_taper_s=_optional_float(a, "force_taper_s", where),
                  trigger_s=_optional_float(a, "trigger_s", where),
-                 sample_rate_hz=rate, fft_precision=_text(a.get("fft_precision")) or "double")
+                 sample_rate_hz=rate, fft_precision=_text(a.get("fft_precision")) or "double",
+                 record_samples=_record_samples(a, f, rate, where))
     return frf, notes
+
+
+def _record_samples(a, f, rate: float, where: str) -> int | None:
+    """``record_samples`` of a zero-padded run (None when absent): a count no longer than ``fs / df``."""
+    if "record_samples" not in a:
+        return None
+    n = _count(a["record_samples"], f"{where}: record_samples")
+    if not 2 <= n <= rate / float(f[1] - f[0]) * (1 + 1e-9):
+        raise RecordingError(f"{where}: record_samples {n} is not a record length of at least 2 samples that "
+                             f"fits the bins ({rate / float(f[1] - f[0]):.0f} samples at most)")
+    return n
 
 
 def _h5_run_metadata(display: str, a, frf, guide):

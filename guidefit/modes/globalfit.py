@@ -472,8 +472,9 @@ class GlobalFit:
         Per mode: ``fit``, ``jackknife`` and ``selection`` std of ``f`` (Hz)
         and ``zeta``.
     excluded_runs : tuple of str
-        Runs on another frequency grid (another record length or sample rate): left out of the fit,
-        not fitted at all (identify warns; their modes come from the other runs or are missing).
+        Runs on another grid than most FRF columns: not fitted (identify warns). Identify's FRF stage
+        puts runs of other record lengths or sample rates on one grid first (:func:`guidefit.frf.common_grid`,
+        zero padding); only FRF files on several grids and non-integer sample rates end here.
     nrmse : float
         Normalised RMS misfit of the fit.
     """
@@ -864,9 +865,10 @@ def global_fit(frf_by_run: dict, band_hz: tuple, *, orders: Sequence[int] = rang
     Parameters
     ----------
     frf_by_run : dict of str to guidefit.frf.FrfSet
-        Each run's FRFs (all response channels). Runs on the frequency grid
-        shared by most FRF columns are fitted together; others are listed in
-        ``excluded_runs``.
+        Each run's FRFs (all response channels), on one frequency grid
+        (:func:`guidefit.identify.run_frfs` makes one for runs of other record
+        lengths or sample rates). Runs off the grid of most FRF columns are
+        listed in ``excluded_runs``, not fitted.
     band_hz : (float, float)
         Band holding every mode of interest; the modes outside it are left to
         the residual terms.

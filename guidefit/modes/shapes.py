@@ -142,4 +142,5 @@ def _half_power_entry(frf, mode) -> dict | None:
     f_n, zeta = undo_window_damping(sdof.f_n_hz, sdof.zeta, frf)
     return {"f_peak_hz": hp.f_peak_hz, "f1_hz": hp.f1_hz, "f2_hz": hp.f2_hz, "zeta": hp.zeta,
             "f_n_hz": f_n, "zeta_window_corrected": zeta, "channel": frf.channels[channel],
-            "bins_in_band": int(round((hp.f2_hz - hp.f1_hz) / (frf.frequency_hz[1] - frf.frequency_hz[0])))}
+            # counted in resolution cells: zero-padded records have finer bins, not a finer resolution
+            "bins_in_band": int(round((hp.f2_hz - hp.f1_hz) / frf.resolution_hz))}

@@ -557,7 +557,8 @@ def render_frf_summary(frfsets, console=None) -> None:
         power[frf.frequency_hz < 20] = 0
         i = int(np.argmax(power))
         table.add_row(frf.run, str(len(frf.channels)), frf.estimator, str(frf.n_averages),
-                      f"{frf.frequency_hz[1] - frf.frequency_hz[0]:.3g}", f"{frf.frequency_hz[i]:.1f}",
+                      f"{frf.resolution_hz:.3g}" + (" (padded)" if frf.record_samples else ""),
+                      f"{frf.frequency_hz[i]:.1f}",
                       f"{float(np.mean(frf.coherence[i])):.3f}")
     console.print(table)
 
