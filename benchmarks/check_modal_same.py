@@ -51,6 +51,7 @@ from dataclasses import replace
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))  # this tree's guidefit, not an installed one (run from a worktree)
 SCRATCH = Path(os.environ.get("GUIDEFIT_CHECK_DIR", "/tmp/guidefit-check-modal"))
 #: the coupled cases of bench_global.py, one seed each
 COUPLED = {
@@ -90,6 +91,8 @@ def cases(e2e: Path) -> dict:
     }
     if e2e.exists():
         out["e2e_100hits"] = (e2e, {})
+    else:
+        print(f"skipped: {e2e} (absent; --e2e names the 100-hit recording)", file=sys.stderr)
     for case in COUPLED:
         out[case] = (simulated(case), {})
     return out
