@@ -173,6 +173,21 @@ def test_unexplained_is_refused_with_one_line(tmp_path):
     assert code == 0
 
 
+def test_a_given_explanation_is_used_or_refused_never_dropped(tmp_path):
+    """identify ran on /data/carriage1.h5, explain on carriage1.h5: the same test; an explanation of
+    another test is an error. Before: neither matched, the given 'unexplained' was dropped, exit 0."""
+    results = _write(tmp_path, "r.jsonl", [dict(RESULT, file="/data/carriage1.h5")])
+    expl = _write(tmp_path, "e.json", [{"file": "carriage1.h5", "verdict": "unexplained", "effects": []}])
+    code, out = _run(results, "--explain", expl)
+    assert code == 1 and "unexplained" in out
+    other = _write(tmp_path, "o.json", [dict(ADEQUATE, file="carriage2.h5")])
+    code, out = _run(results, "--explain", other)
+    assert code == 2 and "matches no result" in out and len(out.strip().splitlines()) == 1
+    modes = _write(tmp_path, "m.json", [dict(ADEQUATE, file=str(results))])  # explain --modes r.jsonl
+    code, out = _run(results, "--explain", modes)
+    assert code == 0, out
+
+
 # --------------------------------------------------------------------------- decks read back
 
 

@@ -331,6 +331,58 @@ def _explain_result(result: dict, where: str) -> dict:
     return explanation.to_dict()
 
 
+def _same_file(a: str, b: str) -> bool:
+    """Two ``file`` entries name one recording: the same text, or the same path once resolved."""
+    from pathlib import Path
+
+    if a == b:
+        return True
+    try:
+        return Path(a).resolve() == Path(b).resolve()
+    except (OSError, ValueError, RuntimeError):
+        return False
+
+
+def match_explanations(results: list, explanations: list[dict], where: str = "results") -> dict[int, dict]:
+    """Which explanation belongs to which result (index into ``results``), by ``file``.
+
+    A ``file`` matches by its text, else by its resolved path, else by its base
+    name when that is unique on both sides (identify and explain run from
+    different directories: ``/data/c1.h5`` and ``c1.h5``); an explanation
+    naming the results file ``where`` itself (``explain --modes r.json``
+    names ``r.json``) belongs to its one result. An explanation that matches no result, or two that
+    match one, is an error: ignoring it would export another joint than the
+    one the user gave (before: a given 'unexplained' explanation was dropped
+    and the result explained anew, exit 0).
+    """
+    from pathlib import PurePath
+
+    if not explanations:
+        return {}
+    files = [str(r.get("file", "")) if isinstance(r, dict) else "" for r in results]
+    out: dict[int, dict] = {}
+
+    def base(name: str) -> str:
+        return PurePath(name.replace("\\", "/")).name
+
+    for k, e in enumerate(explanations):
+        name = str(e.get("file", ""))
+        hits = [j for j, f in enumerate(files) if f == name]
+        hits = hits or [j for j, f in enumerate(files) if _same_file(f, name)]
+        if not hits and sum(base(str(x.get("file", ""))) == base(name) for x in explanations) == 1:
+            hits = [j for j, f in enumerate(files) if base(f) == base(name)]
+        if not hits and len(results) == 1 and _same_file(where, name):
+            hits = [0]  # explain --modes RESULTS --json names the results file
+        if len(hits) != 1:
+            found = "matches no result" if not hits else f"matches {len(hits)} results"
+            raise ExportError(f"{where}: explanation {k + 1} (file {_safe(name, 60)!r}) {found} by file; "
+                              f"the results hold {', '.join(_safe(f, 40) for f in files[:5])}")
+        if hits[0] in out:
+            raise ExportError(f"{where}: two explanations for {_safe(files[hits[0]], 60)}")
+        out[hits[0]] = e
+    return out
+
+
 def joints_from_results(results: list[dict], joint: str = "explained", explanations=(), guide=None,
                         where: str = "results", progress=None) -> list[Joint]:
     """One :class:`Joint` per identified carriage of ``results`` (entries with an error are skipped).
@@ -341,11 +393,10 @@ def joints_from_results(results: list[dict], joint: str = "explained", explanati
     """
     if joint not in JOINTS:
         raise ExportError(f"export: joint '{joint}' unknown; use one of {', '.join(JOINTS)}")
-    by_file = {}
     for k, e in enumerate(explanations):
         if not isinstance(e, dict) or "verdict" not in e:
             raise ExportError(f"explanations entry {k + 1}: not an explain --json object (no verdict)")
-        by_file[str(e.get("file"))] = e
+    matched = match_explanations(results, list(explanations), where)
     joints = []
     for j, result in enumerate(results):
         if not isinstance(result, dict):
@@ -356,7 +407,7 @@ def joints_from_results(results: list[dict], joint: str = "explained", explanati
         if joint == "apparent":
             joints.append(apparent_joint(result, label))
             continue
-        explanation = by_file.get(str(result.get("file")))
+        explanation = matched.get(j)
         if explanation is None:
             if not result.get("modes"):
                 raise ExportError(f"{label}: no modes to explain; give its explain --json with --explain "
