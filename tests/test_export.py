@@ -188,6 +188,27 @@ def test_a_given_explanation_is_used_or_refused_never_dropped(tmp_path):
     assert code == 0, out
 
 
+def test_a_parameter_in_another_unit_is_converted_or_refused(tmp_path):
+    """K_H 'N/mm' was exported as if N/m (5.4e5 for 5.4e8, exit 0); now converted; an unknown unit: exit 2."""
+    result = json.loads(json.dumps(RESULT))
+    result["parameters"]["K_H"] = {"value": 1.0e5, "unit": "N/mm"}
+    code, out = _run(_write(tmp_path, "r.jsonl", [result]), "--joint", "apparent")
+    assert code == 0 and json.loads(out)["joints"][0]["apparent_eq24_29_si"]["K_H_n_per_m"] == pytest.approx(1e8)
+    result["parameters"]["K_H"]["unit"] = "lbf/in"
+    code, out = _run(_write(tmp_path, "r.jsonl", [result]), "--joint", "apparent")
+    assert code == 2 and "lbf/in" in out and len(out.strip().splitlines()) == 1
+
+
+def test_explain_reads_f_h_in_its_unit():
+    """f_H completes a missing roll_low mode: 2.4965 kHz was read as 2.4965 Hz."""
+    from guidefit.explain import modes_from_result
+
+    modes, *_ = modes_from_result({"modes": [{"label": "vertical", "frequency_hz": 3529.0}],
+                                   "parameters": {"f_H": {"value": 2.4965, "unit": "kHz", "std": 0.001}}})
+    roll_low = next(m for m in modes if m.label == "roll_low")
+    assert roll_low.frequency_hz == pytest.approx(2496.5) and roll_low.frequency_std_hz == pytest.approx(1.0)
+
+
 # --------------------------------------------------------------------------- decks read back
 
 

@@ -7,6 +7,7 @@ from pathlib import Path
 
 from guidefit.errors import RecordingError
 from guidefit.explain.settings import canonical_label
+from guidefit.jsonio import parameter_factor
 from guidefit.model.measured import (
     ForceLevel,
     MeasuredMode,
@@ -98,8 +99,10 @@ def _with_joint_parameters(modes: list, params: dict, where: str) -> list:
         p = params.get(key)
         if not isinstance(p, dict) or p.get("value") is None:
             continue
-        value = checked_number(p["value"], f"{where}: parameters '{key}' value")
+        scale = parameter_factor(key, p, where)
+        value = checked_number(p["value"], f"{where}: parameters '{key}' value") * scale
         std = checked_number(p.get("std"), f"{where}: parameters '{key}' std", allow_none=True)
+        std = None if std is None else std * scale
         same = [k for k, m in enumerate(modes) if canonical_label(m.label) == label]
         if not same:
             modes.append(MeasuredMode(value, std, label=label))

@@ -179,13 +179,16 @@ def _finite(value, what: str) -> float:
 
 
 def _value(result: dict, name: str, where: str) -> float:
+    from guidefit.jsonio import parameter_factor
+
     try:
-        value = result["parameters"][name]["value"]
+        param = result["parameters"][name]
+        value = param["value"]
     except (KeyError, TypeError):
         raise ExportError(f"{where}: parameter '{name}' missing") from None
     if value is None:
         raise ExportError(f"{where}: parameter '{name}' was not identified (null); cannot export")
-    value = _finite(value, f"{where}: parameter '{name}'")
+    value = _finite(value, f"{where}: parameter '{name}'") * parameter_factor(name, param, where)
     if not value > 0:
         raise ExportError(f"{where}: parameter '{name}' must be positive, got {value:g}")
     return value
