@@ -355,11 +355,19 @@ def test_id_overflow_and_repeats_are_refused(results_file):
 
 
 def test_missing_parameter_and_bad_json_are_bad_input(tmp_path):
+    """A parameter null (not identified: a valid result of an incomplete identification) is exit 1, as
+    identify's exit for it (was 2, 'bad input'); a parameter missing from the object is bad input."""
     bad = json.loads(json.dumps(RESULT))
     bad["parameters"]["K_H"]["value"] = None
     path = _write(tmp_path, "r.json", [bad])
     code, out = _run(path, "--joint", "apparent")
-    assert code == 2 and "K_H' was not identified" in out
+    assert code == 1 and "K_H' was not identified" in out
+    bad["parameters"]["K_H"] = None
+    code, out = _run(_write(tmp_path, "r.json", [bad]), "--joint", "apparent")
+    assert code == 1 and "K_H' was not identified" in out
+    del bad["parameters"]["K_H"]
+    code, out = _run(_write(tmp_path, "r.json", [bad]), "--joint", "apparent")
+    assert code == 2 and "K_H' missing" in out
     nope = tmp_path / "n.json"
     nope.write_text("{nope\n")
     code, out = _run(nope)

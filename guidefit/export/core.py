@@ -183,11 +183,12 @@ def _value(result: dict, name: str, where: str) -> float:
 
     try:
         param = result["parameters"][name]
-        value = param["value"]
+        value = None if param is None else param["value"]
     except (KeyError, TypeError):
         raise ExportError(f"{where}: parameter '{name}' missing") from None
-    if value is None:
-        raise ExportError(f"{where}: parameter '{name}' was not identified (null); cannot export")
+    if value is None:  # a valid result of an incomplete identification: exit 1, as identify's
+        raise IdentificationError(f"{where}: parameter '{name}' was not identified (null); cannot export "
+                                  "(identification incomplete)")
     value = _finite(value, f"{where}: parameter '{name}'") * parameter_factor(name, param, where)
     if not value > 0:
         raise ExportError(f"{where}: parameter '{name}' must be positive, got {value:g}")
