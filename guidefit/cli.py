@@ -786,13 +786,17 @@ def export_cmd(results, fmt, joint, explain_paths, guide_name, element, units, a
                       units=units, axis_map=axis_map, carriage_nodes=_id_list(carriage_nodes, "--carriage-node"),
                       rail_nodes=_id_list(rail_nodes, "--rail-node"), first_element=first_element,
                       id_step=id_step, n_vertical=n_vertical, n_horizontal=n_horizontal, progress=progress,
-                      assembly=assembly, rot_offset=rot_offset)
+                      assembly=assembly, rot_offset=rot_offset, skipped=(skipped := []))
     if out_path:
         from guidefit.outputs import write_text
 
         write_text(out_path, text)
     else:
         click.echo(text, nl=False)
+    for line in skipped:  # the deck holds the other carriages; exit 1 says it is not every one
+        click.echo(f"guidefit: identification failed: {line}", err=True)
+    if skipped:
+        sys.exit(1)
 
 
 @main.command(name="correlate")

@@ -188,6 +188,17 @@ def test_a_given_explanation_is_used_or_refused_never_dropped(tmp_path):
     assert code == 0, out
 
 
+def test_a_carriage_identify_failed_on_is_not_dropped_in_silence(tmp_path):
+    """identify a.h5 broken.h5 --json: the second line holds 'error'. Was: skipped, one joint, exit 0;
+    now the deck of the others is written, a line names the one left out, exit 1."""
+    failed = {"file": "broken.h5", "guide": None, "modes": [], "error": "broken.h5: truncated HDF5 file",
+              "exit_code": 2}
+    result = CliRunner().invoke(main, ["export", str(_write(tmp_path, "r.jsonl", [RESULT, failed])),
+                                       "--joint", "apparent", "-o", str(tmp_path / "j.json")])
+    assert result.exit_code == 1 and "entry 2 (broken.h5)" in result.stderr and "truncated" in result.stderr
+    assert len(json.loads((tmp_path / "j.json").read_text())["joints"]) == 1  # the identified carriage
+
+
 def test_a_parameter_in_another_unit_is_converted_or_refused(tmp_path):
     """K_H 'N/mm' was exported as if N/m (5.4e5 for 5.4e8, exit 0); now converted; an unknown unit: exit 2."""
     result = json.loads(json.dumps(RESULT))

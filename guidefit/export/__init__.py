@@ -51,14 +51,16 @@ __all__ = [
 
 def export(results_path, fmt: str, *, joint: str = "explained", explanations=(), guide=None,
            element: str = "matrix", units: str = "si", axis_map: str | None = None, progress=None,
-           assembly: str = "include", **numbering) -> str:
+           assembly: str = "include", skipped: list | None = None, **numbering) -> str:
     """Read identify results (and optional explain results) and render them in ``fmt``.
 
     ``explanations`` are paths of ``explain --json`` output; ``numbering``:
     ``carriage_nodes``, ``rail_nodes``, ``first_element``, ``id_step``,
     ``n_vertical``, ``n_horizontal`` of :func:`build_elements` (calculix also
     ``rot_offset``); ``assembly="reference"``: calculix's runnable reference deck
-    (:mod:`guidefit.export.calculix`).
+    (:mod:`guidefit.export.calculix`). ``skipped``: a list that gets one line
+    per result left out because identify failed on it (without it, such a
+    result is an error).
     """
     from guidefit.jsonio import read_json_documents
 
@@ -73,7 +75,7 @@ def export(results_path, fmt: str, *, joint: str = "explained", explanations=(),
     rot = parse_axis_map(axis_map)
     unit_transform(units)
     joints = joints_from_results(read_results(results_path), joint, docs, guide, where=_safe(str(results_path)),
-                                 progress=progress)
+                                 progress=progress, skipped=skipped)
     if fmt == "calculix":
         return _render_calculix(joints, element=element, units=units, axis_map=rot, axis_map_text=axis_map,
                       assembly=assembly, guide=guide, **numbering)

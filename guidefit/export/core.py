@@ -388,8 +388,13 @@ def match_explanations(results: list, explanations: list[dict], where: str = "re
 
 
 def joints_from_results(results: list[dict], joint: str = "explained", explanations=(), guide=None,
-                        where: str = "results", progress=None) -> list[Joint]:
-    """One :class:`Joint` per identified carriage of ``results`` (entries with an error are skipped).
+                        where: str = "results", progress=None, skipped: list | None = None) -> list[Joint]:
+    """One :class:`Joint` per carriage of ``results``.
+
+    An entry with an ``error`` (identify failed on that file) is an
+    :class:`IdentificationError`, or, given a ``skipped`` list, left out with
+    a line appended to it (``guidefit export`` writes the other carriages,
+    prints the lines and exits 1; before, it was left out in silence, exit 0).
 
     ``explanations``: ``explain --json`` objects, matched to results by ``file``;
     a result without one is explained from its modes (as ``explain --modes``).
@@ -405,9 +410,13 @@ def joints_from_results(results: list[dict], joint: str = "explained", explanati
     for j, result in enumerate(results):
         if not isinstance(result, dict):
             raise ExportError(f"{where}: entry {j + 1}: expected a JSON object, got {type(result).__name__}")
-        if "error" in result:
-            continue
         label = _label(result, j, where)
+        if result.get("error") is not None:  # left out, but said: the caller exits 1 (export_cmd)
+            line = f"{label}: identify gave no result ({_safe(str(result['error']), 120)}); carriage not exported"
+            if skipped is None:
+                raise IdentificationError(line)
+            skipped.append(line)
+            continue
         if joint == "apparent":
             joints.append(apparent_joint(result, label))
             continue
@@ -420,6 +429,8 @@ def joints_from_results(results: list[dict], joint: str = "explained", explanati
         joints.append(explained_joint(result, explanation, guide, label))
         if progress is not None:
             progress(j + 1, len(results), _safe(str(result.get("file", "")), 40))
+    if not joints and skipped:
+        raise IdentificationError(f"{where}: no identified carriage to export; {skipped[0]}")
     if not joints:
         raise ExportError(f"{where}: no identified carriage to export")
     return joints
