@@ -91,8 +91,11 @@ def level_from(entry, what: str) -> ForceLevel:
 def _with_joint_parameters(modes: list, params: dict, where: str) -> list:
     """The modes completed by the joint parameters f_V and f_H (value and std) of an identification.
 
-    A vertical or roll_low mode that is missing is added from its parameter;
-    one of the same frequency without a standard deviation takes the parameter's.
+    A vertical or roll_low mode that is missing is added from its parameter,
+    or, where an unlabelled mode has the parameter's frequency, that mode is
+    named by it (before: a list without labels had each joint mode twice, one
+    measurement counted twice in chi2); one of the same frequency without a
+    standard deviation takes the parameter's.
     """
     modes = list(modes)
     for key, label in (("f_V", "vertical"), ("f_H", "roll_low")):
@@ -104,7 +107,14 @@ def _with_joint_parameters(modes: list, params: dict, where: str) -> list:
         std = checked_number(p.get("std"), f"{where}: parameters '{key}' std", allow_none=True)
         std = None if std is None else std * scale
         same = [k for k, m in enumerate(modes) if canonical_label(m.label) == label]
-        if not same:
+        unnamed = [k for k, m in enumerate(modes) if (m.label is None or m.label.strip().lower() in UNNAMED_LABELS)
+                   and abs(m.frequency_hz - value) <= 1e-6 * value]
+        if not same and unnamed:  # the parameter names that mode: one measurement, not two
+            from dataclasses import replace
+
+            m = modes[unnamed[0]]
+            modes[unnamed[0]] = replace(m, label=label, frequency_std_hz=m.frequency_std_hz if std is None else std)
+        elif not same:
             modes.append(MeasuredMode(value, std, label=label))
         elif std is not None:
             for k in same:
