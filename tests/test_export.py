@@ -199,6 +199,25 @@ def test_a_carriage_identify_failed_on_is_not_dropped_in_silence(tmp_path):
     assert len(json.loads((tmp_path / "j.json").read_text())["joints"]) == 1  # the identified carriage
 
 
+def test_export_guide_is_the_guide_the_joint_is_explained_on(tmp_path):
+    """export --guide X: the modes were explained on the result's guide (MRB35: contact_stiffness 0.8)
+    and X's joint built with that factor (a ball guide's rollers x 0.8, 'explained', exit 0); now they
+    are explained on X, as explain --modes --guide X does (nothing fits: exit 1), and an explanation
+    of another guide is refused."""
+    ball = ROOT / "examples" / "guides" / "ball4_size25.toml"
+    sol = vib.solve_modes(vib.model_from_guide(load_guide("MRB35")))
+    soft = json.loads(json.dumps(RESULT))
+    soft["modes"] = [{"label": lab, "frequency_hz": f * math.sqrt(0.8), "frequency_std_hz": 0.1,
+                      "damping_ratio": 0.03} for lab, f in zip(sol.labels, sol.frequencies_hz)]
+    results = _write(tmp_path, "r.jsonl", [soft])
+    code, out = _run(results, "--format", "json")
+    assert code == 0 and "contact_stiffness (factor = 0.8" in out  # on its own guide
+    code, out = _run(results, "--guide", ball)
+    assert code == 1 and "unexplained" in out
+    code, out = _run(results, "--guide", ball, "--explain", _write(tmp_path, "e.json", [ADEQUATE]))
+    assert code == 2 and "fitted on guide 'MRB35'" in out
+
+
 def test_a_parameter_in_another_unit_is_converted_or_refused(tmp_path):
     """K_H 'N/mm' was exported as if N/m (5.4e5 for 5.4e8, exit 0); now converted; an unknown unit: exit 2."""
     result = json.loads(json.dumps(RESULT))

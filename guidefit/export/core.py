@@ -275,6 +275,11 @@ def explained_joint(result: dict, explanation: dict, guide=None, where: str = "r
             "from the rig: export --joint apparent writes the Eq. 24-29 values")
     g = guide if isinstance(guide, Guide) else load_guide(guide or explanation.get("guide")
                                                           or result.get("guide") or "MRB35")
+    fitted_on = explanation.get("guide")
+    if isinstance(fitted_on, str) and fitted_on and fitted_on.upper() != g.name.upper():
+        raise ExportError(f"{where}: the explanation was fitted on guide {_safe(fitted_on, 40)!r}, the joint "
+                          f"would be built on {_safe(g.name, 40)!r}; explain with --guide {_safe(g.name, 40)} "
+                          "or export without --guide")
     effects = _effects_of(explanation, where)
     nominal = vib.model_from_guide(g)
     fitted = apply_effects(nominal, g, effects)
@@ -324,14 +329,16 @@ def _clean_roundoff(m: np.ndarray) -> np.ndarray:
     return out
 
 
-def _explain_result(result: dict, where: str) -> dict:
-    """``explain --modes`` of one identify result (the same call), as its JSON object."""
+def _explain_result(result: dict, where: str, guide=None) -> dict:
+    """``explain --modes`` of one identify result (the same call, with ``--guide`` when given), as its JSON
+    object. The guide is the one the joint is built on: ``export --guide X`` explained on the result's
+    guide and built X's joint with effects fitted to another guide (exit 0)."""
     from guidefit.explain import explain_modes, modes_from_result
-    from guidefit.model.guides import load_guide
+    from guidefit.model.guides import Guide, load_guide
 
     modes, guide_name, sensors, levels = modes_from_result(result, where)
-    explanation = explain_modes(modes, load_guide(guide_name or "MRB35"), sensors, levels,
-                                source=str(result.get("file", where)))
+    g = guide if isinstance(guide, Guide) else load_guide(guide or guide_name or "MRB35")
+    explanation = explain_modes(modes, g, sensors, levels, source=str(result.get("file", where)))
     return explanation.to_dict()
 
 
@@ -425,7 +432,7 @@ def joints_from_results(results: list[dict], joint: str = "explained", explanati
             if not result.get("modes"):
                 raise ExportError(f"{label}: no modes to explain; give its explain --json with --explain "
                                   "or use --joint apparent")
-            explanation = _explain_result(result, label)
+            explanation = _explain_result(result, label, guide)
         joints.append(explained_joint(result, explanation, guide, label))
         if progress is not None:
             progress(j + 1, len(results), _safe(str(result.get("file", "")), 40))
