@@ -928,9 +928,11 @@ def report_cmd(recording, out_path, guide_name, candidates, estimator, no_jackkn
         click.echo(f"guidefit: identification rejected: {recording}: {gate}", err=True)
         sys.exit(1)
     unidentified = getattr(results.identification, "unidentified", ())
-    if unidentified:  # as identify and explain: a joint mode the set-up sees was not found
-        for line in unidentified:
-            click.echo(f"guidefit: identification incomplete: {recording}: {line}", err=True)
+    for line in unidentified:  # as identify and explain: a joint mode the set-up sees was not found
+        click.echo(f"guidefit: identification incomplete: {recording}: {line}", err=True)
+    if results.explanation is None:  # explain failed: the report says so, and so does the exit status
+        click.echo(f"guidefit: explain gave no result: {recording}: {results.explain_error}", err=True)
+    if unidentified or results.explanation is None:
         sys.exit(1)
 
 
