@@ -145,6 +145,14 @@ def test_damping_comes_from_the_mode_not_from_a_force_level_entry():
         explained_joint(RESULT, ADEQUATE).damping[1, 1], rel=1e-12)
 
 
+def test_damping_of_a_mode_labelled_by_an_alias_is_its_own():
+    """'Vertical' (an alias explain reads as vertical) was 'not measured': the mean ratio replaced it."""
+    result = json.loads(json.dumps(RESULT))
+    result["modes"][0]["label"] = "Vertical"
+    assert explained_joint(result, ADEQUATE).damping[1, 1] == pytest.approx(
+        explained_joint(RESULT, ADEQUATE).damping[1, 1], rel=1e-12)
+
+
 def test_paper_like_recording_exports_the_contact_stiffness(tmp_path):
     """The paper's case end to end: identify + explain (soft lateral support, sensor mass) -> joint without them."""
     from guidefit.explain import explain

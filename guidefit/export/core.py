@@ -238,14 +238,20 @@ def _describe(effect) -> str:
 
 
 def _damping_by_label(result: dict) -> dict:
+    """Model mode label -> identified damping ratio. Labels are read as explain reads them
+    (``Vertical``, ``V``, ``f_V``: vertical); before, such a label's damping was 'not measured' and the
+    mean of the other modes replaced it (C_yy +42 %, exit 0)."""
+    from guidefit.explain.settings import canonical_label
+
     out = {}
     for m in list(result.get("modes") or []):
         if isinstance(m, dict) and m.get("level") is not None:
             continue  # one force level's estimate: the mode's own entry carries the test's damping
-        if isinstance(m, dict) and m.get("label") and m.get("damping_ratio") is not None:
+        label = canonical_label(m.get("label")) if isinstance(m, dict) else None
+        if label and m.get("damping_ratio") is not None:
             zeta = float(m["damping_ratio"])
             if math.isfinite(zeta) and zeta >= 0:
-                out.setdefault(str(m["label"]), zeta)
+                out.setdefault(label, zeta)
     return out
 
 
