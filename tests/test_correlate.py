@@ -389,3 +389,20 @@ def test_frfs_of_references_sharing_sensors_give_whole_shapes(tmp_path, frf_both
     paired = np.zeros_like(mac_matrix, dtype=bool)
     paired[[r["fe_mode"] - 1 for r in doc["modes"]], [r["test_mode"] - 1 for r in doc["modes"]]] = True
     assert mac_matrix[~paired].max() < 0.02
+
+
+def test_json_shapes_are_read_along_each_sensor_direction(tmp_path):
+    """A side-face sensor acc_G_x declared along -x: its modal constant was put on +x (a per-DOF sign
+    error that spoils the MAC); now read along -x. An oblique sensor is left out."""
+    from guidefit.machine.correlate import read_test_json
+
+    result = {"file": "r.h5", "modes": [{"label": "roll_low", "frequency_hz": 2496.5,
+                                         "shape": {"acc_E_x": 0.3, "acc_G_x": -0.3, "acc_K_x": 0.2}}],
+              "sensors": [{"name": "acc_E_x", "position_m": [0.05, -0.015, 0.04], "direction": [1, 0, 0]},
+                          {"name": "acc_G_x", "position_m": [-0.05, -0.015, 0.04], "direction": [-1, 0, 0]},
+                          {"name": "acc_K_x", "position_m": [0.05, 0, 0], "direction": [1, 1, 0]}]}
+    path = tmp_path / "r.json"
+    path.write_text(json.dumps(result))
+    test = read_test_json(path)
+    assert test.shapes["E"][0, 0] == pytest.approx(0.3) and test.shapes["G"][0, 0] == pytest.approx(0.3)
+    assert "K" not in test.shapes

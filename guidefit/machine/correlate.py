@@ -72,6 +72,30 @@ def _split_channel(name: str) -> tuple[str, int] | None:
     return (m.group(1), "xyz".index(m.group(2).lower())) if m else None
 
 
+def _sensor_axes(docs) -> dict:
+    """Channel -> (axis index, sign) from the results' ``sensors`` directions; None for an oblique sensor.
+
+    A modal constant is read along the sensor's direction: a side-face sensor ``acc_G_x`` declared along
+    -x reads -x motion, and was put on +x (a per-DOF sign error, so a wrong MAC); an oblique sensor
+    reads no single axis and is left out.
+    """
+    out = {}
+    for d in docs:
+        for s in (d.get("sensors") or []) if isinstance(d, dict) else []:
+            if not isinstance(s, dict) or "name" not in s or not isinstance(s.get("direction"), list):
+                continue
+            try:
+                v = np.asarray(s["direction"], float)
+            except (TypeError, ValueError):
+                continue
+            if v.shape != (3,) or not np.all(np.isfinite(v)) or not np.linalg.norm(v) > 0:
+                continue
+            v = v / np.linalg.norm(v)
+            k = int(np.argmax(np.abs(v)))
+            out.setdefault(str(s["name"]), (k, float(np.sign(v[k]))) if abs(v[k]) > 1 - 1e-6 else None)
+    return out
+
+
 def read_test_json(path) -> FEModes:
     """Modes of guidefit results (``identify --json``): frequencies and real shapes at the sensors."""
     from guidefit.jsonio import read_json_documents
@@ -86,13 +110,18 @@ def read_test_json(path) -> FEModes:
     freqs = np.array([float(m["frequency_hz"]) for m in modes])
     if not np.all(np.isfinite(freqs)) or np.any(freqs <= 0):
         raise CorrelateError(f"{path}: a mode's frequency_hz is not a positive number")
+    axes = _sensor_axes(docs)
     shapes: dict = {}
     for k, m in enumerate(modes):
         for channel, value in (m.get("shape") or {}).items():
             split = _split_channel(str(channel))
-            if split is None or value is None:
+            if split is None or value is None or axes.get(str(channel), 1) is None:
                 continue
-            shapes.setdefault(split[0], np.full((len(modes), 3), np.nan))[k, split[1]] = float(value)
+            point, axis = split
+            sign = 1.0
+            if str(channel) in axes:  # the sensor's own direction, not its name's axis letter
+                axis, sign = axes[str(channel)]
+            shapes.setdefault(point, np.full((len(modes), 3), np.nan))[k, axis] = sign * float(value)
     labels = tuple(str(m.get("label") or "") for m in modes)
     return FEModes(freqs, shapes, str(path), labels)
 
