@@ -205,6 +205,12 @@ def test_a_carriage_identify_failed_on_is_not_dropped_in_silence(tmp_path):
                                        "--joint", "apparent", "-o", str(tmp_path / "j.json")])
     assert result.exit_code == 1 and "entry 2 (broken.h5)" in result.stderr and "truncated" in result.stderr
     assert len(json.loads((tmp_path / "j.json").read_text())["joints"]) == 1  # the identified carriage
+    # node ids given per results line keep their carriages (was: '2 ids for 1 carriage', exit 2)
+    result = CliRunner().invoke(main, ["export", str(tmp_path / "r.jsonl"), "--joint", "apparent",
+                                       "--carriage-node", "11,12", "--rail-node", "21,22", "--format", "json"])
+    assert result.exit_code == 1
+    element = json.loads(result.stdout)["elements"][0]
+    assert (element["carriage_node"], element["rail_node"]) == (11, 21)
 
 
 def test_export_guide_is_the_guide_the_joint_is_explained_on(tmp_path):

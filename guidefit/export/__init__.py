@@ -74,8 +74,13 @@ def export(results_path, fmt: str, *, joint: str = "explained", explanations=(),
         raise ExportError(f"export: --assembly {_safe(assembly, 20)} is for --format calculix only")
     rot = parse_axis_map(axis_map)
     unit_transform(units)
-    joints = joints_from_results(read_results(results_path), joint, docs, guide, where=_safe(str(results_path)),
+    results = read_results(results_path)
+    joints = joints_from_results(results, joint, docs, guide, where=_safe(str(results_path)),
                                  progress=progress, skipped=skipped)
+    for key in ("carriage_nodes", "rail_nodes"):  # ids given per results line: those of left-out lines go
+        ids = numbering.get(key)
+        if ids is not None and len(ids) == len(results) != len(joints):
+            numbering[key] = [ids[j.entry] for j in joints]
     if fmt == "calculix":
         return _render_calculix(joints, element=element, units=units, axis_map=rot, axis_map_text=axis_map,
                       assembly=assembly, guide=guide, **numbering)

@@ -133,6 +133,7 @@ class Joint:
     kept: tuple = ()
     verdict: str | None = None
     notes: tuple = ()
+    entry: int | None = None  # index of its line in the results (export keeps node ids per line)
 
 
 @dataclass(frozen=True)
@@ -413,6 +414,8 @@ def joints_from_results(results: list[dict], joint: str = "explained", explanati
     a result without one is explained from its modes (as ``explain --modes``).
     ``progress(done, total, name)`` is called after each carriage.
     """
+    from dataclasses import replace
+
     if joint not in JOINTS:
         raise ExportError(f"export: joint '{joint}' unknown; use one of {', '.join(JOINTS)}")
     for k, e in enumerate(explanations):
@@ -431,7 +434,7 @@ def joints_from_results(results: list[dict], joint: str = "explained", explanati
             skipped.append(line)
             continue
         if joint == "apparent":
-            joints.append(apparent_joint(result, label))
+            joints.append(replace(apparent_joint(result, label), entry=j))
             continue
         explanation = matched.get(j)
         if explanation is None:
@@ -439,7 +442,7 @@ def joints_from_results(results: list[dict], joint: str = "explained", explanati
                 raise ExportError(f"{label}: no modes to explain; give its explain --json with --explain "
                                   "or use --joint apparent")
             explanation = _explain_result(result, label, guide)
-        joints.append(explained_joint(result, explanation, guide, label))
+        joints.append(replace(explained_joint(result, explanation, guide, label), entry=j))
         if progress is not None:
             progress(j + 1, len(results), _safe(str(result.get("file", "")), 40))
     if not joints and skipped:
