@@ -50,7 +50,7 @@ def read_json_documents(path) -> list:
         raise RecordingError(f"{p}: {info.st_size / 2**30:.1f} GB, larger than the {MAX_JSON_BYTES / 2**30:.0f} GB "
                              "a JSON result file may have; not a result file?")
     try:
-        text = p.read_text(encoding="utf-8")
+        text = p.read_text(encoding="utf-8-sig")  # a byte-order mark (PowerShell, Notepad) is not JSON text
     except FileNotFoundError:
         raise RecordingError(f"{p}: no such file") from None
     except (OSError, UnicodeDecodeError) as exc:
