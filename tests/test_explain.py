@@ -502,3 +502,17 @@ def test_a_joint_parameter_names_its_unlabelled_mode_not_a_second_one():
     assert len(modes) == 5
     assert {m.label for m in modes if m.label} == {"vertical", "roll_low"}
     assert next(m for m in modes if m.label == "vertical").frequency_std_hz == pytest.approx(0.07)
+
+
+def test_a_json_array_of_identify_results_is_read_as_results(tmp_path):
+    """[result] was read as a list of modes ('modes entry 0: frequency_hz missing', and a result's gate
+    went unread); now one result is that result and several are one clear error."""
+    result = {"file": "a.h5", "guide": "MRB35", "parameters": {"f_V": {"value": 3450.0, "std": 0.8}},
+              "modes": [{"label": "vertical", "frequency_hz": 3450.0}]}
+    path = tmp_path / "r.json"
+    path.write_text(json.dumps([result]))
+    modes, guide, _, _ = read_modes_json(path)
+    assert guide == "MRB35" and modes[0].frequency_std_hz == pytest.approx(0.8)
+    path.write_text(json.dumps([result, result]))
+    with pytest.raises(RecordingError, match="array of 2 identify results"):
+        read_modes_json(path)

@@ -218,6 +218,12 @@ def read_modes_json(path):
     if len(docs) != 1:
         raise RecordingError(f"{p}: {len(docs)} JSON lines (one per recording); explain takes one")
     obj = docs[0]
+    results = [e for e in obj if isinstance(e, dict) and ("parameters" in e or "modes" in e)] \
+        if isinstance(obj, list) else []
+    if results and len(obj) == 1:  # [result]: a one-result array (export's input form) is that result
+        obj = obj[0]
+    elif results:  # was read as a list of modes: "modes entry 0: 'frequency_hz' missing"
+        raise RecordingError(f"{p}: a JSON array of {len(obj)} identify results; explain takes one")
     gate = obj.get("gate") if isinstance(obj, dict) else None
     if isinstance(gate, str) and gate:  # as identify said it (exit 1)
         from guidefit.errors import IdentificationError
