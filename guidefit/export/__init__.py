@@ -104,6 +104,12 @@ def _render_calculix(joints: list[Joint], *, element: str = "matrix", units: str
         return to_calculix(joints, elements, units, axis_map_text, element, rot_offset)
     if assembly != "reference":
         raise ExportError(f"export: assembly '{assembly}' unknown; use include or reference")
+    n_v, n_h = numbering.get("n_vertical", 4), numbering.get("n_horizontal", 8)
+    if element == "springs" and (n_v % 4 or n_h % 8):  # springs at some corners only: a joint it is not
+        raise ExportError(f"export: --assembly reference puts the springs at the 4 (vertical) and 8 (horizontal) "
+                          f"corners of the roller rows; --vertical {n_v} --horizontal {n_h} would leave corners "
+                          "empty and couple the modes (vertical 3529 -> 3644 Hz for 3 and 5): give multiples "
+                          "of 4 and 8")
     return reference_deck(joints, elements, units=units, axis_map=axis_map, axis_map_text=axis_map_text,
                           element=element, rot_offset=rot_offset, guide=guide,
                           n_vertical=numbering.get("n_vertical", 4))
