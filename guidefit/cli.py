@@ -714,10 +714,20 @@ def explain_cmd(recording, modes_path, guide_name, candidates, as_json, plot_pat
         click.echo(report.dump_json(result.to_dict()))
     else:
         report.render_explanation(result)
-    if ident is not None and ident.unidentified:  # explained on the modes found; a joint mode is missing
-        for line in ident.unidentified:
-            click.echo(f"guidefit: identification incomplete: {recording}: {line}", err=True)
+    unidentified = ident.unidentified if ident is not None else _unidentified_of(modes_path)
+    if unidentified:  # explained on the modes found; a joint mode is missing
+        for line in unidentified:
+            click.echo(f"guidefit: identification incomplete: {source}: {line}", err=True)
         sys.exit(1)
+
+
+def _unidentified_of(path) -> list[str]:
+    """The ``unidentified`` lines of an ``identify --json`` result (incomplete identification), else []."""
+    from guidefit.jsonio import read_json_documents
+
+    docs = read_json_documents(path)
+    lines = docs[0].get("unidentified") if len(docs) == 1 and isinstance(docs[0], dict) else None
+    return [str(x) for x in lines] if isinstance(lines, list) else []
 
 
 def _id_list(text: str | None, option: str):
@@ -776,13 +786,17 @@ def export_cmd(results, fmt, joint, explain_paths, guide_name, element, units, a
                       units=units, axis_map=axis_map, carriage_nodes=_id_list(carriage_nodes, "--carriage-node"),
                       rail_nodes=_id_list(rail_nodes, "--rail-node"), first_element=first_element,
                       id_step=id_step, n_vertical=n_vertical, n_horizontal=n_horizontal, progress=progress,
-                      assembly=assembly, rot_offset=rot_offset)
+                      assembly=assembly, rot_offset=rot_offset, skipped=(skipped := []))
     if out_path:
         from guidefit.outputs import write_text
 
         write_text(out_path, text)
     else:
         click.echo(text, nl=False)
+    for line in skipped:  # the deck holds the other carriages; exit 1 says it is not every one
+        click.echo(f"guidefit: identification failed: {line}", err=True)
+    if skipped:
+        sys.exit(1)
 
 
 @main.command(name="correlate")
@@ -912,6 +926,13 @@ def report_cmd(recording, out_path, guide_name, candidates, estimator, no_jackkn
     gate = getattr(results.identification, "gate", None)
     if gate:  # as identify: the report shows the modes, no joint parameters; exit 1
         click.echo(f"guidefit: identification rejected: {recording}: {gate}", err=True)
+        sys.exit(1)
+    unidentified = getattr(results.identification, "unidentified", ())
+    for line in unidentified:  # as identify and explain: a joint mode the set-up sees was not found
+        click.echo(f"guidefit: identification incomplete: {recording}: {line}", err=True)
+    if results.explanation is None:  # explain failed: the report says so, and so does the exit status
+        click.echo(f"guidefit: explain gave no result: {recording}: {results.explain_error}", err=True)
+    if unidentified or results.explanation is None:
         sys.exit(1)
 
 

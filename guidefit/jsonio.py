@@ -50,7 +50,7 @@ def read_json_documents(path) -> list:
         raise RecordingError(f"{p}: {info.st_size / 2**30:.1f} GB, larger than the {MAX_JSON_BYTES / 2**30:.0f} GB "
                              "a JSON result file may have; not a result file?")
     try:
-        text = p.read_text(encoding="utf-8")
+        text = p.read_text(encoding="utf-8-sig")  # a byte-order mark (PowerShell, Notepad) is not JSON text
     except FileNotFoundError:
         raise RecordingError(f"{p}: no such file") from None
     except (OSError, UnicodeDecodeError) as exc:
@@ -136,3 +136,42 @@ def _first_not_finite(doc, key: str = ""):
         elif isinstance(item, list):
             stack.extend((f"{key}[{k}]", v) for k, v in reversed(list(enumerate(item))))
     return None
+
+
+#: the contract's unit of each kind of identify parameter (recording-format.md, "Machine-readable
+#: results") and the factor from each other spelling read (spaces, '*' and '.' dropped) to it
+_UNIT_FACTORS = {
+    "f": ("Hz", {"Hz": 1.0, "hz": 1.0, "kHz": 1e3}),
+    "zeta": ("1", {"1": 1.0, "": 1.0, "-": 1.0}),
+    "K": ("N/m", {"N/m": 1.0, "N/mm": 1e3, "N/um": 1e6, "N/µm": 1e6, "N/μm": 1e6, "kN/m": 1e3,
+                  "kN/mm": 1e6, "MN/m": 1e6}),
+    "c": ("N*s/m", {"Ns/m": 1.0, "Ns/mm": 1e3, "kNs/m": 1e3}),
+}
+
+
+def parameter_factor(name: str, param: dict, where: str) -> float:
+    """The factor taking parameter ``name``'s ``value`` (and ``std``) in its ``unit`` to the contract's.
+
+    A parameter without ``unit`` is in the contract's unit; a unit of another
+    scale (``N/mm``, ``kHz``) is converted; any other unit is refused
+    (:class:`~guidefit.errors.RecordingError`, exit 2) rather than read as if
+    it were SI: a hand-edited ``"K_H": {"value": 541328, "unit": "N/mm"}``
+    was exported as 5.4e5 N/m. Parameters of no known kind are returned as they are.
+
+    >>> parameter_factor("K_H", {"value": 541328.4, "unit": "N/mm"}, "r.json")
+    1000.0
+    >>> parameter_factor("f_V", {"value": 3450.0}, "r.json")
+    1.0
+    """
+    kind = name.split("_", 1)[0]
+    if kind not in _UNIT_FACTORS or "_" not in name:
+        return 1.0
+    unit = param.get("unit") if isinstance(param, dict) else None
+    if unit is None:
+        return 1.0
+    si, factors = _UNIT_FACTORS[kind]
+    key = str(unit).replace(" ", "").replace("*", "").replace("·", "").replace(".", "")
+    if key not in factors:
+        raise RecordingError(f"{where}: parameter '{name}' in unit {str(unit)[:20]!r}; "
+                             f"expected {si} (or one of {', '.join(u for u in factors if u)})")
+    return factors[key]

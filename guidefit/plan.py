@@ -150,14 +150,20 @@ def setup_runs(path) -> tuple[str | None, list[PlanRun]]:
 
 
 def recording_runs(recording) -> list[PlanRun]:
-    """PlanRuns of a recording's geometry (no samples are used)."""
+    """PlanRuns of a recording's geometry (no samples are used).
+
+    The hit point is the run's ``hit_position_m`` (``excitation_position_m``, else the force channel's
+    position), as identify's labels use it: a file without ``excitation_position_m`` was planned with
+    the hit point unknown (no participation) though its force channel gives it.
+    """
     out = []
     for run in recording.runs:
         accs = [ch for ch in run.channels if ch.name != "force"]
+        hit = run.hit_position_m
         out.append(PlanRun(run.name, tuple(lab_mod.Sensor(c.name, tuple(map(float, c.position_m)),
                                                           tuple(map(float, c.direction))) for c in accs),
                            tuple(map(float, run.excitation_direction)),
-                           None if run.excitation_position_m is None else tuple(map(float, run.excitation_position_m))))
+                           None if hit is None else tuple(map(float, hit))))
     return out
 
 

@@ -545,12 +545,17 @@ def test_force_sensor_offset_does_not_bias_the_frf(tmp_path, offset_n):
 
 
 def test_html_report_lists_the_hits_of_a_run_without_frf(tmp_path):
-    """Was: the HTML report counted hits from the runs with FRFs only (same gap as the table)."""
+    """Was: the HTML report counted hits from the runs with FRFs only (same gap as the table).
+
+    And: the report of this incomplete identification (identify and explain exit 1) exited 0 with
+    no word of f_V, K_V, c_V missing; now the report is written, says so, and exits 1."""
     path = _all_hits_rejected_in_vertical(tmp_path)
     out = tmp_path / "report.html"
     code, _, err = cli("report", path, "-o", str(out))
-    assert code == 0, err
-    assert "3 accepted, 3 rejected" in out.read_text()
+    assert code == 1, err
+    assert "identification incomplete" in err and "f_V, K_V, c_V not identified" in err
+    text = out.read_text()
+    assert "3 accepted, 3 rejected" in text and "Identification incomplete" in text
 
 
 def test_explain_on_an_incomplete_identification_says_so_and_exits_1(tmp_path):
@@ -561,3 +566,15 @@ def test_explain_on_an_incomplete_identification_says_so_and_exits_1(tmp_path):
     assert code == 1, err
     assert "identification incomplete" in err and "f_V, K_V, c_V not identified" in err
     assert out.strip()  # the explanation of the modes found is still shown
+
+
+def test_explain_modes_of_an_incomplete_result_exits_1(tmp_path):
+    """Was: explain --modes of that file's identify --json ('unidentified' set) exit 0, no word."""
+    path = _all_hits_rejected_in_vertical(tmp_path)
+    _, out, _ = cli("identify", path, "--json")
+    modes = tmp_path / "r.json"
+    modes.write_text(out)
+    code, out, err = cli("explain", "--modes", str(modes), "--candidates", "added_mass", "--json")
+    assert code == 1, err
+    assert "identification incomplete" in err and "f_V, K_V, c_V not identified" in err
+    assert json.loads(out)["verdict"]

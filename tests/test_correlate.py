@@ -84,6 +84,20 @@ def test_without_shapes_pairs_by_order_with_a_warning(tmp_path):
     assert out.exit_code == 1 and "test mode 2" in out.output
 
 
+def test_a_test_that_missed_a_mode_pairs_the_rest_with_their_own_fe_modes(tmp_path):
+    """FE yaw, pitch, roll_low, vertical, roll_high; the test found no pitch (no shapes on the FE side).
+    Was: lowest with lowest, roll_low (2497 Hz) with the FE pitch (2276 Hz), -8.84 %, exit 0."""
+    fe = tmp_path / "fe.csv"
+    fe.write_text("frequency_hz\n1879.1\n2275.9\n2496.5\n3529.0\n5563.6\n")
+    test = tmp_path / "test.csv"
+    test.write_text("frequency_hz\n1879.0\n2496.6\n3529.1\n5563.5\n")
+    out = _invoke(fe, test, "--json", "--check", "max_error_pct=0.1")
+    assert out.exit_code == 0, out.output
+    rows = json.loads(out.stdout)["modes"]
+    assert [r["fe_mode"] for r in rows] == [1, 3, 4, 5]
+    assert max(abs(r["error_pct"]) for r in rows) < 0.01
+
+
 def test_nastran_f06_eigenvalue_table(tmp_path):
     f06 = tmp_path / "run.f06"
     f06.write_text("""1    MSC.NASTRAN JOB                                                   PAGE    12
@@ -375,3 +389,20 @@ def test_frfs_of_references_sharing_sensors_give_whole_shapes(tmp_path, frf_both
     paired = np.zeros_like(mac_matrix, dtype=bool)
     paired[[r["fe_mode"] - 1 for r in doc["modes"]], [r["test_mode"] - 1 for r in doc["modes"]]] = True
     assert mac_matrix[~paired].max() < 0.02
+
+
+def test_json_shapes_are_read_along_each_sensor_direction(tmp_path):
+    """A side-face sensor acc_G_x declared along -x: its modal constant was put on +x (a per-DOF sign
+    error that spoils the MAC); now read along -x. An oblique sensor is left out."""
+    from guidefit.machine.correlate import read_test_json
+
+    result = {"file": "r.h5", "modes": [{"label": "roll_low", "frequency_hz": 2496.5,
+                                         "shape": {"acc_E_x": 0.3, "acc_G_x": -0.3, "acc_K_x": 0.2}}],
+              "sensors": [{"name": "acc_E_x", "position_m": [0.05, -0.015, 0.04], "direction": [1, 0, 0]},
+                          {"name": "acc_G_x", "position_m": [-0.05, -0.015, 0.04], "direction": [-1, 0, 0]},
+                          {"name": "acc_K_x", "position_m": [0.05, 0, 0], "direction": [1, 1, 0]}]}
+    path = tmp_path / "r.json"
+    path.write_text(json.dumps(result))
+    test = read_test_json(path)
+    assert test.shapes["E"][0, 0] == pytest.approx(0.3) and test.shapes["G"][0, 0] == pytest.approx(0.3)
+    assert "K" not in test.shapes

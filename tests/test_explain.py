@@ -488,3 +488,31 @@ def test_explain_identification_uses_modes_sensors_and_skips_bad_levels():
     assert result.source == "fake.h5"
     assert any("force level skipped" in n for n in result.notes)
     assert result.modes[0]["mac_after"] > 0.99
+
+
+def test_a_joint_parameter_names_its_unlabelled_mode_not_a_second_one():
+    """A list without labels beside f_V, f_H at the same frequencies: each joint mode was added a second
+    time (7 modes for 5 measured, one measurement counted twice); now the parameter names that mode."""
+    from guidefit.explain import modes_from_result
+
+    freqs = (1879.1, 2275.9, 2496.5, 3529.0, 5563.6)
+    result = {"modes": [{"label": None, "frequency_hz": f, "frequency_std_hz": 0.1} for f in freqs],
+              "parameters": {"f_V": {"value": 3529.0, "std": 0.07}, "f_H": {"value": 2496.5, "std": 0.2}}}
+    modes, *_ = modes_from_result(result)
+    assert len(modes) == 5
+    assert {m.label for m in modes if m.label} == {"vertical", "roll_low"}
+    assert next(m for m in modes if m.label == "vertical").frequency_std_hz == pytest.approx(0.07)
+
+
+def test_a_json_array_of_identify_results_is_read_as_results(tmp_path):
+    """[result] was read as a list of modes ('modes entry 0: frequency_hz missing', and a result's gate
+    went unread); now one result is that result and several are one clear error."""
+    result = {"file": "a.h5", "guide": "MRB35", "parameters": {"f_V": {"value": 3450.0, "std": 0.8}},
+              "modes": [{"label": "vertical", "frequency_hz": 3450.0}]}
+    path = tmp_path / "r.json"
+    path.write_text(json.dumps([result]))
+    modes, guide, _, _ = read_modes_json(path)
+    assert guide == "MRB35" and modes[0].frequency_std_hz == pytest.approx(0.8)
+    path.write_text(json.dumps([result, result]))
+    with pytest.raises(RecordingError, match="array of 2 identify results"):
+        read_modes_json(path)

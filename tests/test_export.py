@@ -145,6 +145,14 @@ def test_damping_comes_from_the_mode_not_from_a_force_level_entry():
         explained_joint(RESULT, ADEQUATE).damping[1, 1], rel=1e-12)
 
 
+def test_damping_of_a_mode_labelled_by_an_alias_is_its_own():
+    """'Vertical' (an alias explain reads as vertical) was 'not measured': the mean ratio replaced it."""
+    result = json.loads(json.dumps(RESULT))
+    result["modes"][0]["label"] = "Vertical"
+    assert explained_joint(result, ADEQUATE).damping[1, 1] == pytest.approx(
+        explained_joint(RESULT, ADEQUATE).damping[1, 1], rel=1e-12)
+
+
 def test_paper_like_recording_exports_the_contact_stiffness(tmp_path):
     """The paper's case end to end: identify + explain (soft lateral support, sensor mass) -> joint without them."""
     from guidefit.explain import explain
@@ -171,6 +179,78 @@ def test_unexplained_is_refused_with_one_line(tmp_path):
     assert code == 1 and "--joint apparent" in out and len(out.strip().splitlines()) == 1
     code, out = _run(results, "--joint", "apparent")
     assert code == 0
+
+
+def test_a_given_explanation_is_used_or_refused_never_dropped(tmp_path):
+    """identify ran on /data/carriage1.h5, explain on carriage1.h5: the same test; an explanation of
+    another test is an error. Before: neither matched, the given 'unexplained' was dropped, exit 0."""
+    results = _write(tmp_path, "r.jsonl", [dict(RESULT, file="/data/carriage1.h5")])
+    expl = _write(tmp_path, "e.json", [{"file": "carriage1.h5", "verdict": "unexplained", "effects": []}])
+    code, out = _run(results, "--explain", expl)
+    assert code == 1 and "unexplained" in out
+    other = _write(tmp_path, "o.json", [dict(ADEQUATE, file="carriage2.h5")])
+    code, out = _run(results, "--explain", other)
+    assert code == 2 and "matches no result" in out and len(out.strip().splitlines()) == 1
+    modes = _write(tmp_path, "m.json", [dict(ADEQUATE, file=str(results))])  # explain --modes r.jsonl
+    code, out = _run(results, "--explain", modes)
+    assert code == 0, out
+
+
+def test_a_carriage_identify_failed_on_is_not_dropped_in_silence(tmp_path):
+    """identify a.h5 broken.h5 --json: the second line holds 'error'. Was: skipped, one joint, exit 0;
+    now the deck of the others is written, a line names the one left out, exit 1."""
+    failed = {"file": "broken.h5", "guide": None, "modes": [], "error": "broken.h5: truncated HDF5 file",
+              "exit_code": 2}
+    result = CliRunner().invoke(main, ["export", str(_write(tmp_path, "r.jsonl", [RESULT, failed])),
+                                       "--joint", "apparent", "-o", str(tmp_path / "j.json")])
+    assert result.exit_code == 1 and "entry 2 (broken.h5)" in result.stderr and "truncated" in result.stderr
+    assert len(json.loads((tmp_path / "j.json").read_text())["joints"]) == 1  # the identified carriage
+    # node ids given per results line keep their carriages (was: '2 ids for 1 carriage', exit 2)
+    result = CliRunner().invoke(main, ["export", str(tmp_path / "r.jsonl"), "--joint", "apparent",
+                                       "--carriage-node", "11,12", "--rail-node", "21,22", "--format", "json"])
+    assert result.exit_code == 1
+    element = json.loads(result.stdout)["elements"][0]
+    assert (element["carriage_node"], element["rail_node"]) == (11, 21)
+
+
+def test_export_guide_is_the_guide_the_joint_is_explained_on(tmp_path):
+    """export --guide X: the modes were explained on the result's guide (MRB35: contact_stiffness 0.8)
+    and X's joint built with that factor (a ball guide's rollers x 0.8, 'explained', exit 0); now they
+    are explained on X, as explain --modes --guide X does (nothing fits: exit 1), and an explanation
+    of another guide is refused."""
+    ball = ROOT / "examples" / "guides" / "ball4_size25.toml"
+    sol = vib.solve_modes(vib.model_from_guide(load_guide("MRB35")))
+    soft = json.loads(json.dumps(RESULT))
+    soft["modes"] = [{"label": lab, "frequency_hz": f * math.sqrt(0.8), "frequency_std_hz": 0.1,
+                      "damping_ratio": 0.03} for lab, f in zip(sol.labels, sol.frequencies_hz)]
+    results = _write(tmp_path, "r.jsonl", [soft])
+    code, out = _run(results, "--format", "json")
+    assert code == 0 and "contact_stiffness (factor = 0.8" in out  # on its own guide
+    code, out = _run(results, "--guide", ball)
+    assert code == 1 and "unexplained" in out
+    code, out = _run(results, "--guide", ball, "--explain", _write(tmp_path, "e.json", [ADEQUATE]))
+    assert code == 2 and "fitted on guide 'MRB35'" in out
+
+
+def test_a_parameter_in_another_unit_is_converted_or_refused(tmp_path):
+    """K_H 'N/mm' was exported as if N/m (5.4e5 for 5.4e8, exit 0); now converted; an unknown unit: exit 2."""
+    result = json.loads(json.dumps(RESULT))
+    result["parameters"]["K_H"] = {"value": 1.0e5, "unit": "N/mm"}
+    code, out = _run(_write(tmp_path, "r.jsonl", [result]), "--joint", "apparent")
+    assert code == 0 and json.loads(out)["joints"][0]["apparent_eq24_29_si"]["K_H_n_per_m"] == pytest.approx(1e8)
+    result["parameters"]["K_H"]["unit"] = "lbf/in"
+    code, out = _run(_write(tmp_path, "r.jsonl", [result]), "--joint", "apparent")
+    assert code == 2 and "lbf/in" in out and len(out.strip().splitlines()) == 1
+
+
+def test_explain_reads_f_h_in_its_unit():
+    """f_H completes a missing roll_low mode: 2.4965 kHz was read as 2.4965 Hz."""
+    from guidefit.explain import modes_from_result
+
+    modes, *_ = modes_from_result({"modes": [{"label": "vertical", "frequency_hz": 3529.0}],
+                                   "parameters": {"f_H": {"value": 2.4965, "unit": "kHz", "std": 0.001}}})
+    roll_low = next(m for m in modes if m.label == "roll_low")
+    assert roll_low.frequency_hz == pytest.approx(2496.5) and roll_low.frequency_std_hz == pytest.approx(1.0)
 
 
 # --------------------------------------------------------------------------- decks read back
@@ -319,11 +399,19 @@ def test_id_overflow_and_repeats_are_refused(results_file):
 
 
 def test_missing_parameter_and_bad_json_are_bad_input(tmp_path):
+    """A parameter null (not identified: a valid result of an incomplete identification) is exit 1, as
+    identify's exit for it (was 2, 'bad input'); a parameter missing from the object is bad input."""
     bad = json.loads(json.dumps(RESULT))
     bad["parameters"]["K_H"]["value"] = None
     path = _write(tmp_path, "r.json", [bad])
     code, out = _run(path, "--joint", "apparent")
-    assert code == 2 and "K_H' was not identified" in out
+    assert code == 1 and "K_H' was not identified" in out
+    bad["parameters"]["K_H"] = None
+    code, out = _run(_write(tmp_path, "r.json", [bad]), "--joint", "apparent")
+    assert code == 1 and "K_H' was not identified" in out
+    del bad["parameters"]["K_H"]
+    code, out = _run(_write(tmp_path, "r.json", [bad]), "--joint", "apparent")
+    assert code == 2 and "K_H' missing" in out
     nope = tmp_path / "n.json"
     nope.write_text("{nope\n")
     code, out = _run(nope)

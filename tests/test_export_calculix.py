@@ -143,6 +143,16 @@ def test_too_many_springs_for_the_rotation_offset_is_refused(files):
     assert out.exit_code == 2 and "id" in out.output and len(out.output.strip().splitlines()) == 1
 
 
+def test_reference_springs_at_some_corners_only_are_refused(files):
+    """--vertical 3 --horizontal 5: three of the four corners held springs, so the reference deck's
+    vertical mode was 3644 Hz for the joint's 3529 Hz (exit 0); now one line, exit 2."""
+    out = CliRunner().invoke(main, ["export", str(files[0]), "--format", "calculix", "--joint", "apparent",
+                                    "--element", "springs", "--vertical", "3", "--horizontal", "5",
+                                    "--assembly", "reference"])
+    assert out.exit_code == 2 and "multiples of 4 and 8" in out.output
+    assert len(out.output.strip().splitlines()) == 1
+
+
 # --------------------------------------------------------------------------- ccx
 
 

@@ -53,6 +53,10 @@ def test_user_toml_with_units(tmp_path):
         ("contact_angle_deg = 45", "contact_angle_deg = 95", "in \\(0, 90\\)"),
         ('name = "MY35"', 'name = "MY35"\ncolour = "red"', "unknown field 'colour'"),
         ("[contact]", "[contact]\nwear = 1", "unknown field 'contact.wear'"),
+        # lengths in mm given as m: e_m = 32 gave a 64 m carriage and MHz modes with exit 0
+        ('e_m = "32 mm"', "e_m = 32", "rows.e_m': 32 is 32 m; .*millimetres given"),
+        ('e_m = "32 mm"', 'e_m = "32 m"', "rows.e_m': '32 m' is 32 m"),
+        ("A = [0.03, 0, 0.045]", "A = [30, 0, 45]", "points.A'.*millimetres given"),
     ],
 )
 def test_bad_guide_files_give_one_line_errors(tmp_path, old, new, match):

@@ -156,3 +156,19 @@ def test_explain_plot_draws_the_identification_it_explained(tmp_path, monkeypatc
     result = CliRunner().invoke(main, ["explain", str(SAMPLE), "--no-jackknife", "--plot", str(png)])
     assert result.exit_code == 0, result.output
     assert "overlay left out" not in result.output and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_a_failed_explanation_is_said_and_exits_1(tmp_path, monkeypatch):
+    """explain raising (a model error) left 'explain gave no result' inside the HTML and exit 0."""
+    import guidefit.explain
+    from guidefit.errors import ModelError
+
+    def failing(*args, **kwargs):
+        raise ModelError("the model has no solution here")
+
+    monkeypatch.setattr(guidefit.explain, "explain", failing)
+    out = tmp_path / "r.html"
+    result = CliRunner().invoke(main, ["report", str(SAMPLE), "-o", str(out), "--no-jackknife"])
+    assert result.exit_code == 1
+    assert "explain gave no result" in result.stderr and "no solution here" in result.stderr
+    assert "no solution here" in out.read_text(encoding="utf-8")  # the report is still written

@@ -389,3 +389,12 @@ def test_library_log_warnings_are_one_guidefit_line(monkeypatch, capsys):
     logger.warning("Matplotlib is building the font cache;\nwait")
     assert capsys.readouterr().err == "guidefit: warning: Matplotlib is building the font cache; wait " \
                                       "(matplotlib.font_manager.test)\n"
+
+
+def test_a_json_result_with_a_byte_order_mark_is_read(tmp_path):
+    """A results file saved by a Windows editor starts with a UTF-8 BOM; it was 'not JSON', exit 2."""
+    from guidefit.jsonio import read_json_documents
+
+    path = tmp_path / "r.json"
+    path.write_bytes(b"\xef\xbb\xbf" + b'{"a": 1}\n{"a": 2}\n')
+    assert read_json_documents(path) == [{"a": 1}, {"a": 2}]

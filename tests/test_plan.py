@@ -77,6 +77,26 @@ def test_plan_agrees_with_identify_on_a_simulated_recording(tmp_path):
         assert m.label_basis in ("shape", "shape+frequency")
 
 
+def test_a_recording_without_excitation_position_is_planned_at_its_force_channel(tmp_path):
+    """The contract's force channel position is the hit point; was: 'hit at unknown', no participation."""
+    import h5py
+
+    from guidefit.io import write_recording
+    from guidefit.simulate import SimulationConfig, simulate
+
+    data, _ = simulate("MRB35", config=SimulationConfig(hits=1, record_s=0.01, sensor_layout="default"), seed=2)
+    path = tmp_path / "rec.h5"
+    write_recording(path, data)
+    with_attr = plan(path, search=False).to_dict()
+    with h5py.File(path, "r+") as f:
+        for run in f["runs"].values():
+            del run.attrs["excitation_position_m"]
+    without = plan(path, search=False).to_dict()
+    assert [r["excitation_position_m"] for r in without["runs"]] == [r["excitation_position_m"]
+                                                                     for r in with_attr["runs"]]
+    assert without["modes"] == with_attr["modes"]
+
+
 def _setup(folder):
     text = """format = "guidefit-setup"
 format_version = 1

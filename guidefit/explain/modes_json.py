@@ -7,6 +7,7 @@ from pathlib import Path
 
 from guidefit.errors import RecordingError
 from guidefit.explain.settings import canonical_label
+from guidefit.jsonio import parameter_factor
 from guidefit.model.measured import (
     ForceLevel,
     MeasuredMode,
@@ -90,18 +91,30 @@ def level_from(entry, what: str) -> ForceLevel:
 def _with_joint_parameters(modes: list, params: dict, where: str) -> list:
     """The modes completed by the joint parameters f_V and f_H (value and std) of an identification.
 
-    A vertical or roll_low mode that is missing is added from its parameter;
-    one of the same frequency without a standard deviation takes the parameter's.
+    A vertical or roll_low mode that is missing is added from its parameter,
+    or, where an unlabelled mode has the parameter's frequency, that mode is
+    named by it (before: a list without labels had each joint mode twice, one
+    measurement counted twice in chi2); one of the same frequency without a
+    standard deviation takes the parameter's.
     """
     modes = list(modes)
     for key, label in (("f_V", "vertical"), ("f_H", "roll_low")):
         p = params.get(key)
         if not isinstance(p, dict) or p.get("value") is None:
             continue
-        value = checked_number(p["value"], f"{where}: parameters '{key}' value")
+        scale = parameter_factor(key, p, where)
+        value = checked_number(p["value"], f"{where}: parameters '{key}' value") * scale
         std = checked_number(p.get("std"), f"{where}: parameters '{key}' std", allow_none=True)
+        std = None if std is None else std * scale
         same = [k for k, m in enumerate(modes) if canonical_label(m.label) == label]
-        if not same:
+        unnamed = [k for k, m in enumerate(modes) if (m.label is None or m.label.strip().lower() in UNNAMED_LABELS)
+                   and abs(m.frequency_hz - value) <= 1e-6 * value]
+        if not same and unnamed:  # the parameter names that mode: one measurement, not two
+            from dataclasses import replace
+
+            m = modes[unnamed[0]]
+            modes[unnamed[0]] = replace(m, label=label, frequency_std_hz=m.frequency_std_hz if std is None else std)
+        elif not same:
             modes.append(MeasuredMode(value, std, label=label))
         elif std is not None:
             for k in same:
@@ -205,6 +218,12 @@ def read_modes_json(path):
     if len(docs) != 1:
         raise RecordingError(f"{p}: {len(docs)} JSON lines (one per recording); explain takes one")
     obj = docs[0]
+    results = [e for e in obj if isinstance(e, dict) and ("parameters" in e or "modes" in e)] \
+        if isinstance(obj, list) else []
+    if results and len(obj) == 1:  # [result]: a one-result array (export's input form) is that result
+        obj = obj[0]
+    elif results:  # was read as a list of modes: "modes entry 0: 'frequency_hz' missing"
+        raise RecordingError(f"{p}: a JSON array of {len(obj)} identify results; explain takes one")
     gate = obj.get("gate") if isinstance(obj, dict) else None
     if isinstance(gate, str) and gate:  # as identify said it (exit 1)
         from guidefit.errors import IdentificationError

@@ -51,14 +51,16 @@ __all__ = [
 
 def export(results_path, fmt: str, *, joint: str = "explained", explanations=(), guide=None,
            element: str = "matrix", units: str = "si", axis_map: str | None = None, progress=None,
-           assembly: str = "include", **numbering) -> str:
+           assembly: str = "include", skipped: list | None = None, **numbering) -> str:
     """Read identify results (and optional explain results) and render them in ``fmt``.
 
     ``explanations`` are paths of ``explain --json`` output; ``numbering``:
     ``carriage_nodes``, ``rail_nodes``, ``first_element``, ``id_step``,
     ``n_vertical``, ``n_horizontal`` of :func:`build_elements` (calculix also
     ``rot_offset``); ``assembly="reference"``: calculix's runnable reference deck
-    (:mod:`guidefit.export.calculix`).
+    (:mod:`guidefit.export.calculix`). ``skipped``: a list that gets one line
+    per result left out because identify failed on it (without it, such a
+    result is an error).
     """
     from guidefit.jsonio import read_json_documents
 
@@ -72,8 +74,13 @@ def export(results_path, fmt: str, *, joint: str = "explained", explanations=(),
         raise ExportError(f"export: --assembly {_safe(assembly, 20)} is for --format calculix only")
     rot = parse_axis_map(axis_map)
     unit_transform(units)
-    joints = joints_from_results(read_results(results_path), joint, docs, guide, where=_safe(str(results_path)),
-                                 progress=progress)
+    results = read_results(results_path)
+    joints = joints_from_results(results, joint, docs, guide, where=_safe(str(results_path)),
+                                 progress=progress, skipped=skipped)
+    for key in ("carriage_nodes", "rail_nodes"):  # ids given per results line: those of left-out lines go
+        ids = numbering.get(key)
+        if ids is not None and len(ids) == len(results) != len(joints):
+            numbering[key] = [ids[j.entry] for j in joints]
     if fmt == "calculix":
         return _render_calculix(joints, element=element, units=units, axis_map=rot, axis_map_text=axis_map,
                       assembly=assembly, guide=guide, **numbering)
@@ -97,6 +104,12 @@ def _render_calculix(joints: list[Joint], *, element: str = "matrix", units: str
         return to_calculix(joints, elements, units, axis_map_text, element, rot_offset)
     if assembly != "reference":
         raise ExportError(f"export: assembly '{assembly}' unknown; use include or reference")
+    n_v, n_h = numbering.get("n_vertical", 4), numbering.get("n_horizontal", 8)
+    if element == "springs" and (n_v % 4 or n_h % 8):  # springs at some corners only: a joint it is not
+        raise ExportError(f"export: --assembly reference puts the springs at the 4 (vertical) and 8 (horizontal) "
+                          f"corners of the roller rows; --vertical {n_v} --horizontal {n_h} would leave corners "
+                          "empty and couple the modes (vertical 3529 -> 3644 Hz for 3 and 5): give multiples "
+                          "of 4 and 8")
     return reference_deck(joints, elements, units=units, axis_map=axis_map, axis_map_text=axis_map_text,
                           element=element, rot_offset=rot_offset, guide=guide,
                           n_vertical=numbering.get("n_vertical", 4))

@@ -133,6 +133,7 @@ class Joint:
     kept: tuple = ()
     verdict: str | None = None
     notes: tuple = ()
+    entry: int | None = None  # index of its line in the results (export keeps node ids per line)
 
 
 @dataclass(frozen=True)
@@ -179,13 +180,17 @@ def _finite(value, what: str) -> float:
 
 
 def _value(result: dict, name: str, where: str) -> float:
+    from guidefit.jsonio import parameter_factor
+
     try:
-        value = result["parameters"][name]["value"]
+        param = result["parameters"][name]
+        value = None if param is None else param["value"]
     except (KeyError, TypeError):
         raise ExportError(f"{where}: parameter '{name}' missing") from None
-    if value is None:
-        raise ExportError(f"{where}: parameter '{name}' was not identified (null); cannot export")
-    value = _finite(value, f"{where}: parameter '{name}'")
+    if value is None:  # a valid result of an incomplete identification: exit 1, as identify's
+        raise IdentificationError(f"{where}: parameter '{name}' was not identified (null); cannot export "
+                                  "(identification incomplete)")
+    value = _finite(value, f"{where}: parameter '{name}'") * parameter_factor(name, param, where)
     if not value > 0:
         raise ExportError(f"{where}: parameter '{name}' must be positive, got {value:g}")
     return value
@@ -234,14 +239,20 @@ def _describe(effect) -> str:
 
 
 def _damping_by_label(result: dict) -> dict:
+    """Model mode label -> identified damping ratio. Labels are read as explain reads them
+    (``Vertical``, ``V``, ``f_V``: vertical); before, such a label's damping was 'not measured' and the
+    mean of the other modes replaced it (C_yy +42 %, exit 0)."""
+    from guidefit.explain.settings import canonical_label
+
     out = {}
     for m in list(result.get("modes") or []):
         if isinstance(m, dict) and m.get("level") is not None:
             continue  # one force level's estimate: the mode's own entry carries the test's damping
-        if isinstance(m, dict) and m.get("label") and m.get("damping_ratio") is not None:
+        label = canonical_label(m.get("label")) if isinstance(m, dict) else None
+        if label and m.get("damping_ratio") is not None:
             zeta = float(m["damping_ratio"])
             if math.isfinite(zeta) and zeta >= 0:
-                out.setdefault(str(m["label"]), zeta)
+                out.setdefault(label, zeta)
     return out
 
 
@@ -271,6 +282,11 @@ def explained_joint(result: dict, explanation: dict, guide=None, where: str = "r
             "from the rig: export --joint apparent writes the Eq. 24-29 values")
     g = guide if isinstance(guide, Guide) else load_guide(guide or explanation.get("guide")
                                                           or result.get("guide") or "MRB35")
+    fitted_on = explanation.get("guide")
+    if isinstance(fitted_on, str) and fitted_on and fitted_on.upper() != g.name.upper():
+        raise ExportError(f"{where}: the explanation was fitted on guide {_safe(fitted_on, 40)!r}, the joint "
+                          f"would be built on {_safe(g.name, 40)!r}; explain with --guide {_safe(g.name, 40)} "
+                          "or export without --guide")
     effects = _effects_of(explanation, where)
     nominal = vib.model_from_guide(g)
     fitted = apply_effects(nominal, g, effects)
@@ -320,51 +336,117 @@ def _clean_roundoff(m: np.ndarray) -> np.ndarray:
     return out
 
 
-def _explain_result(result: dict, where: str) -> dict:
-    """``explain --modes`` of one identify result (the same call), as its JSON object."""
+def _explain_result(result: dict, where: str, guide=None) -> dict:
+    """``explain --modes`` of one identify result (the same call, with ``--guide`` when given), as its JSON
+    object. The guide is the one the joint is built on: ``export --guide X`` explained on the result's
+    guide and built X's joint with effects fitted to another guide (exit 0)."""
     from guidefit.explain import explain_modes, modes_from_result
-    from guidefit.model.guides import load_guide
+    from guidefit.model.guides import Guide, load_guide
 
     modes, guide_name, sensors, levels = modes_from_result(result, where)
-    explanation = explain_modes(modes, load_guide(guide_name or "MRB35"), sensors, levels,
-                                source=str(result.get("file", where)))
+    g = guide if isinstance(guide, Guide) else load_guide(guide or guide_name or "MRB35")
+    explanation = explain_modes(modes, g, sensors, levels, source=str(result.get("file", where)))
     return explanation.to_dict()
 
 
+def _same_file(a: str, b: str) -> bool:
+    """Two ``file`` entries name one recording: the same text, or the same path once resolved."""
+    from pathlib import Path
+
+    if a == b:
+        return True
+    try:
+        return Path(a).resolve() == Path(b).resolve()
+    except (OSError, ValueError, RuntimeError):
+        return False
+
+
+def match_explanations(results: list, explanations: list[dict], where: str = "results") -> dict[int, dict]:
+    """Which explanation belongs to which result (index into ``results``), by ``file``.
+
+    A ``file`` matches by its text, else by its resolved path, else by its base
+    name when that is unique on both sides (identify and explain run from
+    different directories: ``/data/c1.h5`` and ``c1.h5``); an explanation
+    naming the results file ``where`` itself (``explain --modes r.json``
+    names ``r.json``) belongs to its one result. An explanation that matches no result, or two that
+    match one, is an error: ignoring it would export another joint than the
+    one the user gave (before: a given 'unexplained' explanation was dropped
+    and the result explained anew, exit 0).
+    """
+    from pathlib import PurePath
+
+    if not explanations:
+        return {}
+    files = [str(r.get("file", "")) if isinstance(r, dict) else "" for r in results]
+    out: dict[int, dict] = {}
+
+    def base(name: str) -> str:
+        return PurePath(name.replace("\\", "/")).name
+
+    for k, e in enumerate(explanations):
+        name = str(e.get("file", ""))
+        hits = [j for j, f in enumerate(files) if f == name]
+        hits = hits or [j for j, f in enumerate(files) if _same_file(f, name)]
+        if not hits and sum(base(str(x.get("file", ""))) == base(name) for x in explanations) == 1:
+            hits = [j for j, f in enumerate(files) if base(f) == base(name)]
+        if not hits and len(results) == 1 and _same_file(where, name):
+            hits = [0]  # explain --modes RESULTS --json names the results file
+        if len(hits) != 1:
+            found = "matches no result" if not hits else f"matches {len(hits)} results"
+            raise ExportError(f"{where}: explanation {k + 1} (file {_safe(name, 60)!r}) {found} by file; "
+                              f"the results hold {', '.join(_safe(f, 40) for f in files[:5])}")
+        if hits[0] in out:
+            raise ExportError(f"{where}: two explanations for {_safe(files[hits[0]], 60)}")
+        out[hits[0]] = e
+    return out
+
+
 def joints_from_results(results: list[dict], joint: str = "explained", explanations=(), guide=None,
-                        where: str = "results", progress=None) -> list[Joint]:
-    """One :class:`Joint` per identified carriage of ``results`` (entries with an error are skipped).
+                        where: str = "results", progress=None, skipped: list | None = None) -> list[Joint]:
+    """One :class:`Joint` per carriage of ``results``.
+
+    An entry with an ``error`` (identify failed on that file) is an
+    :class:`IdentificationError`, or, given a ``skipped`` list, left out with
+    a line appended to it (``guidefit export`` writes the other carriages,
+    prints the lines and exits 1; before, it was left out in silence, exit 0).
 
     ``explanations``: ``explain --json`` objects, matched to results by ``file``;
     a result without one is explained from its modes (as ``explain --modes``).
     ``progress(done, total, name)`` is called after each carriage.
     """
+    from dataclasses import replace
+
     if joint not in JOINTS:
         raise ExportError(f"export: joint '{joint}' unknown; use one of {', '.join(JOINTS)}")
-    by_file = {}
     for k, e in enumerate(explanations):
         if not isinstance(e, dict) or "verdict" not in e:
             raise ExportError(f"explanations entry {k + 1}: not an explain --json object (no verdict)")
-        by_file[str(e.get("file"))] = e
+    matched = match_explanations(results, list(explanations), where)
     joints = []
     for j, result in enumerate(results):
         if not isinstance(result, dict):
             raise ExportError(f"{where}: entry {j + 1}: expected a JSON object, got {type(result).__name__}")
-        if "error" in result:
-            continue
         label = _label(result, j, where)
-        if joint == "apparent":
-            joints.append(apparent_joint(result, label))
+        if result.get("error") is not None:  # left out, but said: the caller exits 1 (export_cmd)
+            line = f"{label}: identify gave no result ({_safe(str(result['error']), 120)}); carriage not exported"
+            if skipped is None:
+                raise IdentificationError(line)
+            skipped.append(line)
             continue
-        explanation = by_file.get(str(result.get("file")))
+        if joint == "apparent":
+            joints.append(replace(apparent_joint(result, label), entry=j))
+            continue
+        explanation = matched.get(j)
         if explanation is None:
             if not result.get("modes"):
                 raise ExportError(f"{label}: no modes to explain; give its explain --json with --explain "
                                   "or use --joint apparent")
-            explanation = _explain_result(result, label)
-        joints.append(explained_joint(result, explanation, guide, label))
+            explanation = _explain_result(result, label, guide)
+        joints.append(replace(explained_joint(result, explanation, guide, label), entry=j))
         if progress is not None:
             progress(j + 1, len(results), _safe(str(result.get("file", "")), 40))
+    if not joints and skipped:
+        raise IdentificationError(f"{where}: no identified carriage to export; {skipped[0]}")
     if not joints:
         raise ExportError(f"{where}: no identified carriage to export")
     return joints

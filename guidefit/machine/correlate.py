@@ -12,7 +12,8 @@ Pairing: where both sides have shapes at common points (names equal, or
 mapped by a point-map file: lines ``test_point = fe_point``), each test mode
 is paired with the FE mode of largest MAC (one FE mode per test mode, the
 assignment of largest total MAC); else by order (lowest test mode with lowest
-FE mode), with a warning. The error is the paper's Eq. (34),
+FE mode; with more FE modes, those skipped keep the pairs nearest in
+frequency: :func:`order_pairing`), with a warning. The error is the paper's Eq. (34),
 e = (f_FE - f_test) / f_test x 100 %, signed (positive: the model is stiff);
 ``--check max_error_pct`` bounds its magnitude.
 
@@ -71,6 +72,30 @@ def _split_channel(name: str) -> tuple[str, int] | None:
     return (m.group(1), "xyz".index(m.group(2).lower())) if m else None
 
 
+def _sensor_axes(docs) -> dict:
+    """Channel -> (axis index, sign) from the results' ``sensors`` directions; None for an oblique sensor.
+
+    A modal constant is read along the sensor's direction: a side-face sensor ``acc_G_x`` declared along
+    -x reads -x motion, and was put on +x (a per-DOF sign error, so a wrong MAC); an oblique sensor
+    reads no single axis and is left out.
+    """
+    out = {}
+    for d in docs:
+        for s in (d.get("sensors") or []) if isinstance(d, dict) else []:
+            if not isinstance(s, dict) or "name" not in s or not isinstance(s.get("direction"), list):
+                continue
+            try:
+                v = np.asarray(s["direction"], float)
+            except (TypeError, ValueError):
+                continue
+            if v.shape != (3,) or not np.all(np.isfinite(v)) or not np.linalg.norm(v) > 0:
+                continue
+            v = v / np.linalg.norm(v)
+            k = int(np.argmax(np.abs(v)))
+            out.setdefault(str(s["name"]), (k, float(np.sign(v[k]))) if abs(v[k]) > 1 - 1e-6 else None)
+    return out
+
+
 def read_test_json(path) -> FEModes:
     """Modes of guidefit results (``identify --json``): frequencies and real shapes at the sensors."""
     from guidefit.jsonio import read_json_documents
@@ -85,13 +110,18 @@ def read_test_json(path) -> FEModes:
     freqs = np.array([float(m["frequency_hz"]) for m in modes])
     if not np.all(np.isfinite(freqs)) or np.any(freqs <= 0):
         raise CorrelateError(f"{path}: a mode's frequency_hz is not a positive number")
+    axes = _sensor_axes(docs)
     shapes: dict = {}
     for k, m in enumerate(modes):
         for channel, value in (m.get("shape") or {}).items():
             split = _split_channel(str(channel))
-            if split is None or value is None:
+            if split is None or value is None or axes.get(str(channel), 1) is None:
                 continue
-            shapes.setdefault(split[0], np.full((len(modes), 3), np.nan))[k, split[1]] = float(value)
+            point, axis = split
+            sign = 1.0
+            if str(channel) in axes:  # the sensor's own direction, not its name's axis letter
+                axis, sign = axes[str(channel)]
+            shapes.setdefault(point, np.full((len(modes), 3), np.nan))[k, axis] = sign * float(value)
     labels = tuple(str(m.get("label") or "") for m in modes)
     return FEModes(freqs, shapes, str(path), labels)
 
@@ -320,6 +350,36 @@ def mac_matrix(fe: FEModes, test: FEModes, point_map: dict | None = None) -> tup
     return out, tuple(t for t, _ in pairs)
 
 
+def order_pairing(fe_hz, test_hz) -> dict:
+    """Test mode index -> FE mode index, in order (lowest with lowest), skipping FE modes where there are more.
+
+    With as many FE as test modes this is lowest with lowest. With more FE
+    modes the FE modes to skip are chosen so that the ordered pairs are
+    nearest in frequency (least total |ln(f_FE / f_test)|, dynamic
+    programming): a test that missed a mode pairs the modes after it with
+    their own FE modes, not each with the FE mode below (before: a test
+    without pitch paired roll_low 2497 Hz with the FE pitch 2276 Hz, -8.8 %).
+
+    >>> order_pairing([1879.0, 2276.0, 2496.0, 3529.0], [1879.0, 2497.0, 3530.0])
+    {0: 0, 1: 2, 2: 3}
+    """
+    fe_i, test_j = np.argsort(fe_hz), np.argsort(test_hz)
+    a, b = np.log(np.asarray(fe_hz, float)[fe_i]), np.log(np.asarray(test_hz, float)[test_j])
+    n, m = len(a), len(b)
+    cost = np.full((n + 1, m + 1), np.inf)
+    cost[:, 0] = 0.0
+    for i in range(1, n + 1):
+        for j in range(1, min(i, m) + 1):
+            cost[i, j] = min(cost[i - 1, j], cost[i - 1, j - 1] + abs(a[i - 1] - b[j - 1]))
+    pairing, i, j = {}, n, m
+    while j > 0:
+        if cost[i, j] == cost[i - 1, j - 1] + abs(a[i - 1] - b[j - 1]):
+            pairing[int(test_j[j - 1])] = int(fe_i[i - 1])
+            j -= 1
+        i -= 1
+    return dict(sorted(pairing.items()))
+
+
 def correlate(fe: FEModes, test: FEModes, point_map: dict | None = None) -> Correlation:
     """Pair the modes (MAC where shapes allow, else order) and give Eq. (34) and MAC per pair."""
     notes = []
@@ -349,8 +409,10 @@ def correlate(fe: FEModes, test: FEModes, point_map: dict | None = None) -> Corr
                          + ": modes paired by order (lowest with lowest)")
         if len(fe) < len(test):
             raise CorrelateError(f"{len(test)} test modes but only {len(fe)} FE modes: compute more FE modes")
-        fe_order, test_order = np.argsort(fe.frequencies_hz), np.argsort(test.frequencies_hz)
-        pairing = dict(zip(test_order, fe_order))
+        pairing = order_pairing(fe.frequencies_hz, test.frequencies_hz)
+        if len(fe) > len(test):
+            notes.append(f"{len(fe)} FE modes for {len(test)} test modes: the FE modes skipped are those that "
+                         "keep the ordered pairs nearest in frequency")
         paired_by = "order"
     rows = []
     for j in np.argsort(test.frequencies_hz):

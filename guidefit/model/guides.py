@@ -249,6 +249,8 @@ MAX_POINTS = 100
 """Largest number of ``[points]`` (measuring points A-D and any others)."""
 MAX_GUIDE_FILE_BYTES = 1_000_000
 """Largest guide TOML read (the built-in one is ~2 kB): a bigger file is not a guide."""
+MAX_LENGTH_M = 1.0
+"""Largest length (row offsets, depths, spans, diameters, points) a guide gives, m: more is mm given as m."""
 
 
 def load_guide(name_or_path: str | Path) -> Guide:
@@ -492,6 +494,15 @@ def _scalar(value, unit: str | None, what: str) -> float:
     return number
 
 
+def _length_checked(number: float, unit, what: str, value) -> float:
+    """A length of a carriage (m) within :data:`MAX_LENGTH_M`: ``e_m = "5.5 m"`` or ``e_m = 5.5`` meant mm
+    and gave roll_high at 5.5 MHz with exit 0."""
+    if unit == "m" and abs(number) > MAX_LENGTH_M:
+        raise GuideError(f"{what}: {value!r} is {abs(number):g} m; a carriage's lengths are at most "
+                         f"{MAX_LENGTH_M:g} m (millimetres given? write \"5.5 mm\" or 0.0055)")
+    return number
+
+
 def _convert(value, unit, kind, what):
     if isinstance(kind, tuple):
         if value not in kind:
@@ -500,7 +511,7 @@ def _convert(value, unit, kind, what):
     if kind in ("vec3", "pos3"):
         if not isinstance(value, list) or len(value) != 3:
             raise GuideError(f"{what}: expected a list of 3 numbers, got {value!r}")
-        vec = tuple(_scalar(v, unit, what) for v in value)
+        vec = tuple(_length_checked(_scalar(v, unit, what), unit, what, value) for v in value)
         if kind == "pos3" and min(vec) <= 0:
             raise GuideError(f"{what}: all three values must be positive, got {value!r}")
         return vec
@@ -508,7 +519,7 @@ def _convert(value, unit, kind, what):
         if isinstance(value, bool) or not isinstance(value, int) or value < 1:
             raise GuideError(f"{what}: expected a positive integer, got {value!r}")
         return value
-    number = _scalar(value, unit, what)
+    number = _length_checked(_scalar(value, unit, what), unit, what, value)
     if kind == "pos" and number <= 0:
         raise GuideError(f"{what}: must be positive, got {value!r}")
     if kind == "nonneg" and number < 0:

@@ -221,6 +221,8 @@ def _header(res: ReportResults) -> list[str]:
     banner = ([f"<p class='warn'><b>Identification rejected</b> (identify and explain exit 1): {_e(gate)}. "
                "No joint parameters and no explanation are given; the modes found are listed below.</p>"]
               if gate else [])
+    banner += [f"<p class='warn'><b>Identification incomplete</b> (identify, explain and report exit 1): "
+               f"{_e(line)}</p>" for line in getattr(ident, "unidentified", ()) or ()]
     parts = [f"<h1>guidefit report: {_e(res.path)}</h1>", *banner, "<h2>Provenance</h2>",
              _table([], meta, table_cls="meta"),
              "<p>The same results as these commands (the report runs their calls with these settings):</p>",
