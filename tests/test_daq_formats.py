@@ -528,10 +528,12 @@ def default_layout_setup(tmp_path_factory):
                                                          for k, n in enumerate(run.channel_names)},
                                                       "fs": run.sample_rate_hz})
 
-    def identify_with(name: str, directions: dict):
+    def identify_with(name: str, directions: dict, sensor_directions: dict | None = None):
         lines = ['format = "guidefit-setup"', "format_version = 1", 'guide = "MRB35"']
         for ch in dict.fromkeys(n for r in data.runs for n in r.channel_names):
             lines += [f"[channels.{ch}]", f'source = "{ch}"', f'unit = "{"N" if ch == "force" else "m/s^2"}"']
+            if ch in (sensor_directions or {}):
+                lines.append(f"direction = {json.dumps(sensor_directions[ch])}")
         for run in data.runs:
             lines += [f"[runs.{run.name}]", f'file = "{run.name}.mat"',
                       f"excitation_direction = {json.dumps(directions.get(run.name, run.excitation_direction.tolist()))}",
@@ -573,3 +575,28 @@ def test_setup_with_the_hammer_sign_reversed_keeps_k_and_names_it(default_layout
     for key in ("K_V", "K_H"):
         assert result.parameters[key]["value"] == pytest.approx(truth["parameters"][key]["value"], rel=5e-3)
     assert any("run 'vertical'" in w and "excitation_direction" in w and "reversed" in w for w in result.warnings)
+
+
+@pytest.mark.parametrize("axis, along, key", [("y", [1.0, 0.0, 0.0], "V"), ("x", [0.0, 0.0, 1.0], "H")])
+def test_setup_with_a_run_of_sensors_along_the_wrong_axis_is_incomplete_and_says_so(default_layout_setup, axis,
+                                                                                     along, key):
+    """Was: the vertical run's four y sensors entered with direction x (or the lateral run's x sensors with
+    z) made the declared layout one that 'cannot see' the vertical (roll_low) mode: K_V (K_H) null, exit 0,
+    while the run's strongest mode at 3529 Hz was 'a mode the model does not predict'. A joint mode the
+    declared layout cannot see beside strong modes the model cannot place is not decided: exit 1, the line
+    names the modes and what may be entered wrong; the other joint parameter as before."""
+    from click.testing import CliRunner
+
+    from guidefit.cli import main
+
+    identify_with, truth = default_layout_setup
+    wrong = {f"acc_{p}_{axis}": along for p in "ABCD"}
+    result, path = identify_with(f"sensors_{axis}", {}, wrong)
+    other = "H" if key == "V" else "V"
+    assert result.parameters[f"K_{key}"]["value"] is None
+    assert result.parameters[f"K_{other}"]["value"] == pytest.approx(truth["parameters"][f"K_{other}"]["value"],
+                                                                     rel=5e-3)
+    (line,) = [u for u in result.unidentified if u.startswith(f"f_{key}")]
+    assert "the model does not predict" in line and "direction or position" in line
+    out = CliRunner().invoke(main, ["identify", str(path)])
+    assert out.exit_code == 1 and "identification incomplete" in out.output
