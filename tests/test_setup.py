@@ -656,3 +656,14 @@ def test_two_runs_on_the_same_file_are_refused(folder, group):
         read_recording("test.toml")
     result = CliRunner().invoke(main, ["identify", "test.toml"])
     assert result.exit_code == 2 and len(result.output.strip().splitlines()) == 1, result.output
+
+
+@pytest.mark.parametrize("source, meant", [("hammer", "Hammer"), ("Hammer ", "Hammer"), ("accA_y", "AccA_Y")])
+def test_a_source_that_differs_in_case_or_spaces_names_the_channel_meant(folder, source, meant):
+    """Was: 'vertical.tdms: no channel 'AY'; the file has Hammer, AY , BY' (a trailing space in the DAQ's name
+    invisible in the list). Names still match exactly (exit 2); the line now names the channel meant."""
+    old = 'source = "AccA_Y"' if meant == "AccA_Y" else 'source = "Hammer"'
+    (folder / "test.toml").write_text(edit(GOOD, old, f"source = {json.dumps(source)}"))
+    result = CliRunner().invoke(main, ["identify", "test.toml"])
+    assert result.exit_code == 2
+    assert result.output.strip().endswith(f"did you mean '{meant}' (names are matched exactly: case and spaces count)?")
