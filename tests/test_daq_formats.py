@@ -600,3 +600,25 @@ def test_setup_with_a_run_of_sensors_along_the_wrong_axis_is_incomplete_and_says
     assert "the model does not predict" in line and "direction or position" in line
     out = CliRunner().invoke(main, ["identify", str(path)])
     assert out.exit_code == 1 and "identification incomplete" in out.output
+
+
+@pytest.mark.parametrize("bad", ["OVL", "#N/A", "Hammer,A_Y"])
+@pytest.mark.parametrize("header", ["", "Hammer,A_Y\n"])
+def test_text_cell_that_is_not_a_number_early_in_the_data_is_named(tmp_path, bad, header):
+    """Was: a text cell in row 300 of 2000 (a DAQ's 'OVL', a spreadsheet's '#N/A', a second export's header)
+    made the longer block below it 'the data' and that row its header: every row above was dropped
+    without a word (a setup with column indices and sample_rate_hz: 45699 of 46000 samples, hit 0 lost,
+    exit 0). Now one line naming the row; a header above the data is still a header."""
+    from guidefit.io._daq import RunOptions
+    from guidefit.io.text import open_daq
+
+    rows = [f"{k * 0.5:g},{k % 7 - 3:g}" for k in range(2000)]
+    rows[300] = bad if "," in bad else f"{bad},1"
+    (tmp_path / "x.csv").write_text(header + "\n".join(rows) + "\n")
+    with pytest.raises(ValueError, match=rf"^x.csv: line {302 if header else 301}: '{bad.split(',')[0]}' \(field 0\) "
+                                         r"is not a number, between rows of numbers above and below"):
+        open_daq(tmp_path / "x.csv", "x.csv", RunOptions("t.toml: runs.a"))
+    rows[300] = "150,1"
+    (tmp_path / "x.csv").write_text(header + "\n".join(rows) + "\n")
+    daq = open_daq(tmp_path / "x.csv", "x.csv", RunOptions("t.toml: runs.a"))
+    assert daq.make_source(daq.channels, np.float64).read((slice(None), 0)).size == 2000
