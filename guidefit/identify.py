@@ -58,6 +58,7 @@ import numpy as np
 from guidefit.errors import IdentificationError, identification_failure
 from guidefit.identify_runs import (
     _excitation_warnings,
+    _frequency_scale_warnings,
     _force_levels,
     _hit_row,
     _quality_warnings,
@@ -697,6 +698,7 @@ def conclude(path, recording, guide, model, settings: IdentifySettings, fit: Mod
     sets = fit.check.sets
     warnings = (*warnings, *_quality_warnings(modes, settings),
                 *_excitation_warnings(modes, {r.name: r.frf for r in runs}),
+                *_frequency_scale_warnings(modes, recording),
                 *consistency.unknown_hit_warnings(recording))
     params = joint_parameters(guide.mass_kg, joint)
     # modes that are found but not named (ambiguous) count as missing for the gate

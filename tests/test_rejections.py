@@ -155,3 +155,26 @@ def test_frf_of_a_recording_with_a_run_of_no_accepted_hit_is_incomplete(tmp_path
     from guidefit.io.frf_files import read_input
 
     assert [r.name for r in read_input(out).recording.runs] == ["lateral"]
+
+
+@pytest.mark.parametrize("factor", [0.5, 2.0])
+def test_a_sample_rate_wrong_by_a_factor_is_named(tmp_path, factor):
+    """Was: a recording whose sample rate is stated 2x too low (a MAT fs of 100 kHz for 200 kHz) gave f_V,
+    f_H half the truth, K_V, K_H a quarter, c half, exit 0 and no warning: shapes, labels and modal
+    masses come out as on the right rate. Every mode at one factor from the model's frequency is now
+    named with the rate that would put them there; the right rate gives no such warning."""
+    from guidefit.identify import identify
+
+    data, truth = simulate("MRB35", config=replace(SimulationConfig(), **SMALL), seed=3)
+    good = tmp_path / "good.h5"
+    write_recording(good, data)
+    wrong = tmp_path / "wrong.h5"
+    write_recording(wrong, replace(data, runs=tuple(replace(r, sample_rate_hz=r.sample_rate_hz * factor)
+                                                   for r in data.runs)))
+    assert not any("times the model's frequency" in w for w in identify(good).warnings)
+    result = identify(wrong)
+    assert result.parameters["K_V"]["value"] == pytest.approx(truth["parameters"]["K_V"]["value"] * factor**2,
+                                                              rel=1e-2)
+    (line,) = [w for w in result.warnings if "times the model's frequency" in w]
+    assert f"every mode found is {factor:.3g} times the model's frequency" in line
+    assert f"the recording says {200000 * factor:.9g} Hz" in line and "check the DAQ's sample rate" in line
