@@ -58,8 +58,8 @@ import numpy as np
 from guidefit.errors import IdentificationError, identification_failure
 from guidefit.identify_runs import (
     _excitation_warnings,
-    _frequency_scale_warnings,
     _force_levels,
+    _frequency_scale_warnings,
     _hit_row,
     _quality_warnings,
     dead_channel_warnings,
