@@ -657,6 +657,21 @@ def frf_cmd(recording, estimator, window_text, out_path, fft_precision):
         click.echo(f"FRFs of {len(frfsets)} run(s) written to {out_path}")
     else:
         report.render_frf_summary(frfsets)
+    _frf_incomplete(recording, frfsets, warnings)
+
+
+def _frf_incomplete(recording, frfsets, warnings) -> None:
+    """Exit 1 with one line per run of ``recording`` that gave no FRF (every hit rejected): the runs
+    that gave one are shown or written, as identify keeps the parameters it found."""
+    from guidefit.io.frf_files import read_metadata
+
+    got = {f.run for f in frfsets}
+    missing = [r.name for r in read_metadata(recording).runs if r.name not in got]
+    for name in missing:
+        why = next((w for w in warnings if w.startswith(f"run '{name}': ")), f"run '{name}': no FRF")
+        click.echo(f"guidefit: frf incomplete: {recording}: {why}", err=True)
+    if missing:
+        sys.exit(1)
 
 
 @main.command(name="explain")

@@ -753,7 +753,9 @@ def _find_triggers(run: Run, level: float, offset: float, holdoff: int, chunk: i
         stop = min(n, start + chunk)
         x = reader.read_block(start, stop, [run.force_index])[:, 0] - offset
         with np.errstate(invalid="ignore"):
-            above = np.abs(x) >= level
+            # a corrupt force sample (NaN, Inf, beyond 1e100) may hide an impact: it opens a window as one,
+            # so the record around it is read and rejected as non_finite (else that hit vanished unnamed)
+            above = ~(np.abs(x) < _ABSURD_SAMPLE) | (np.abs(x) >= level)
         before = np.empty_like(above)
         before[0] = previous_above
         before[1:] = above[:-1]
@@ -781,7 +783,7 @@ def _find_triggers(run: Run, level: float, offset: float, holdoff: int, chunk: i
         windows = still_open
     for w in windows:
         peaks[w[0]] = w[2] if w[2] >= -w[3] else w[3]
-    return triggers, peaks
+    return triggers, [p if math.isfinite(p) else math.nan for p in peaks]
 
 
 def _signal_hits(run: Run, s: HitSettings, chunk: int) -> Iterator[Hit]:

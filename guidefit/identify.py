@@ -59,6 +59,7 @@ from guidefit.errors import IdentificationError, identification_failure
 from guidefit.identify_runs import (
     _excitation_warnings,
     _force_levels,
+    _frequency_scale_warnings,
     _hit_row,
     _quality_warnings,
     dead_channel_warnings,
@@ -697,6 +698,7 @@ def conclude(path, recording, guide, model, settings: IdentifySettings, fit: Mod
     sets = fit.check.sets
     warnings = (*warnings, *_quality_warnings(modes, settings),
                 *_excitation_warnings(modes, {r.name: r.frf for r in runs}),
+                *_frequency_scale_warnings(modes, recording),
                 *consistency.unknown_hit_warnings(recording))
     params = joint_parameters(guide.mass_kg, joint)
     # modes that are found but not named (ambiguous) count as missing for the gate
@@ -749,7 +751,37 @@ def _unidentified(joint: dict, model, sets, modes, lost=()) -> tuple:  # modes: 
         if failed:
             out.append(f"f_{key}, K_{key}, c_{key} not identified: run '{failed[0]}', which excites and sees the "
                        f"{label} mode, gave no FRF (every hit rejected; the warnings say why)")
+            continue
+        unexplained = _strong_extras(modes)
+        if unexplained:
+            runs = "; ".join(f"run '{r}': {', '.join(f'{f:.0f}' for f in fs)} Hz" for r, fs in unexplained.items())
+            out.append(f"f_{key}, K_{key}, c_{key} not identified: the layout as declared cannot see the {label} "
+                       f"mode, but strong modes the model does not predict are there ({runs}): a sensor's "
+                       "direction or position, or the hammer's, may be entered wrong")
     return tuple(out)
+
+
+def _strong_extras(modes) -> dict:
+    """Run -> frequencies of its strong modes (modal-constant norm in that run at least
+    :data:`guidefit.hammer_check.STRONG` of its strongest mode's) that the model does not predict
+    (``extra``). On a set-up as declared, a run's strong modes are carriage modes; when one is not, a
+    joint mode the declared layout "cannot see" may be that mode (a vertical run's sensors declared along x
+    show the vertical mode as a lateral shape at the vertical mode's frequency)."""
+    from guidefit.hammer_check import STRONG
+
+    sizes: dict = {}
+    for m in modes:
+        for run, shape in (getattr(m, "shapes", None) or {}).items():
+            size = float(np.linalg.norm(list(shape.values()))) if shape else 0.0
+            sizes.setdefault(run, []).append((size, m))
+    out: dict = {}
+    for run, entries in sizes.items():
+        top = max(size for size, _ in entries)
+        found = sorted(m.frequency_hz for size, m in entries
+                       if top > 0 and size >= STRONG * top and getattr(m, "label", None) == "extra")
+        if found:
+            out[run] = found
+    return out
 
 
 # --------------------------------------------------------------------------- force levels fitted apart

@@ -561,3 +561,30 @@ def _excitation_warnings(modes, frf_by_run: dict) -> list[str]:
                             f"its spectral peak (limit {MAX_FORCE_DROP_DB:.0f} dB; a harder tip helps); the frequency "
                             "and damping may be off by more than their std")
     return warnings
+
+
+#: every labelled mode this many times the model's frequency (or 1/this), all on one side: a time-base error
+FREQUENCY_SCALE_WARN = 1.5
+
+
+def _frequency_scale_warnings(modes, recording) -> list[str]:
+    """One warning when every labelled carriage mode (at least two) lies :data:`FREQUENCY_SCALE_WARN` or more
+    times above (or below) the model's frequency: a wrong sample rate in a file (a MAT ``fs`` of 100 kHz
+    for 200 kHz) scales every frequency alike, K by the square and c by the factor, and nothing else in
+    the data shows it (shapes, labels and modal masses come out as on the right rate). A carriage whose
+    preload or guide differs from the model moves its modes far less, and not all alike."""
+    ratios = [m.frequency_hz / m.model_frequency_hz for m in modes
+              if getattr(m, "model_frequency_hz", None) and m.frequency_hz > 0]
+    if len(ratios) < 2:
+        return []
+    low, high = min(ratios), max(ratios)
+    if not (low >= FREQUENCY_SCALE_WARN or high <= 1.0 / FREQUENCY_SCALE_WARN):
+        return []
+    factor = math.exp(float(np.mean(np.log(ratios))))
+    rates = sorted({float(r.sample_rate_hz) for r in getattr(recording, "runs", ())})
+    said = ", ".join(f"{r:.9g}" for r in rates)
+    times = f"{factor:.3g}" if high < 1.02 * low else f"{low:.3g}-{high:.3g}"
+    return [f"every mode found is {times} times the model's frequency: a sample rate that is wrong by "
+            f"that factor (the recording says {said} Hz; {', '.join(f'{r / factor:.6g}' for r in rates)} Hz would put "
+            f"the modes at the model's) scales every frequency alike, K by its square ({factor ** 2:.3g}x) and c "
+            "by it; check the DAQ's sample rate, or the guide"]

@@ -528,10 +528,12 @@ def default_layout_setup(tmp_path_factory):
                                                          for k, n in enumerate(run.channel_names)},
                                                       "fs": run.sample_rate_hz})
 
-    def identify_with(name: str, directions: dict):
+    def identify_with(name: str, directions: dict, sensor_directions: dict | None = None):
         lines = ['format = "guidefit-setup"', "format_version = 1", 'guide = "MRB35"']
         for ch in dict.fromkeys(n for r in data.runs for n in r.channel_names):
             lines += [f"[channels.{ch}]", f'source = "{ch}"', f'unit = "{"N" if ch == "force" else "m/s^2"}"']
+            if ch in (sensor_directions or {}):
+                lines.append(f"direction = {json.dumps(sensor_directions[ch])}")
         for run in data.runs:
             lines += [f"[runs.{run.name}]", f'file = "{run.name}.mat"',
                       f"excitation_direction = {json.dumps(directions.get(run.name, run.excitation_direction.tolist()))}",
@@ -573,3 +575,50 @@ def test_setup_with_the_hammer_sign_reversed_keeps_k_and_names_it(default_layout
     for key in ("K_V", "K_H"):
         assert result.parameters[key]["value"] == pytest.approx(truth["parameters"][key]["value"], rel=5e-3)
     assert any("run 'vertical'" in w and "excitation_direction" in w and "reversed" in w for w in result.warnings)
+
+
+@pytest.mark.parametrize("axis, along, key", [("y", [1.0, 0.0, 0.0], "V"), ("x", [0.0, 0.0, 1.0], "H")])
+def test_setup_with_a_run_of_sensors_along_the_wrong_axis_is_incomplete_and_says_so(default_layout_setup, axis,
+                                                                                     along, key):
+    """Was: the vertical run's four y sensors entered with direction x (or the lateral run's x sensors with
+    z) made the declared layout one that 'cannot see' the vertical (roll_low) mode: K_V (K_H) null, exit 0,
+    while the run's strongest mode at 3529 Hz was 'a mode the model does not predict'. A joint mode the
+    declared layout cannot see beside strong modes the model cannot place is not decided: exit 1, the line
+    names the modes and what may be entered wrong; the other joint parameter as before."""
+    from click.testing import CliRunner
+
+    from guidefit.cli import main
+
+    identify_with, truth = default_layout_setup
+    wrong = {f"acc_{p}_{axis}": along for p in "ABCD"}
+    result, path = identify_with(f"sensors_{axis}", {}, wrong)
+    other = "H" if key == "V" else "V"
+    assert result.parameters[f"K_{key}"]["value"] is None
+    assert result.parameters[f"K_{other}"]["value"] == pytest.approx(truth["parameters"][f"K_{other}"]["value"],
+                                                                     rel=5e-3)
+    (line,) = [u for u in result.unidentified if u.startswith(f"f_{key}")]
+    assert "the model does not predict" in line and "direction or position" in line
+    out = CliRunner().invoke(main, ["identify", str(path)])
+    assert out.exit_code == 1 and "identification incomplete" in out.output
+
+
+@pytest.mark.parametrize("bad", ["OVL", "#N/A", "Hammer,A_Y"])
+@pytest.mark.parametrize("header", ["", "Hammer,A_Y\n"])
+def test_text_cell_that_is_not_a_number_early_in_the_data_is_named(tmp_path, bad, header):
+    """Was: a text cell in row 300 of 2000 (a DAQ's 'OVL', a spreadsheet's '#N/A', a second export's header)
+    made the longer block below it 'the data' and that row its header: every row above was dropped
+    without a word (a setup with column indices and sample_rate_hz: 45699 of 46000 samples, hit 0 lost,
+    exit 0). Now one line naming the row; a header above the data is still a header."""
+    from guidefit.io._daq import RunOptions
+    from guidefit.io.text import open_daq
+
+    rows = [f"{k * 0.5:g},{k % 7 - 3:g}" for k in range(2000)]
+    rows[300] = bad if "," in bad else f"{bad},1"
+    (tmp_path / "x.csv").write_text(header + "\n".join(rows) + "\n")
+    with pytest.raises(ValueError, match=rf"^x.csv: line {302 if header else 301}: '{bad.split(',')[0]}' \(field 0\) "
+                                         r"is not a number, between rows of numbers above and below"):
+        open_daq(tmp_path / "x.csv", "x.csv", RunOptions("t.toml: runs.a"))
+    rows[300] = "150,1"
+    (tmp_path / "x.csv").write_text(header + "\n".join(rows) + "\n")
+    daq = open_daq(tmp_path / "x.csv", "x.csv", RunOptions("t.toml: runs.a"))
+    assert daq.make_source(daq.channels, np.float64).read((slice(None), 0)).size == 2000

@@ -946,3 +946,17 @@ def test_a_signal_holding_one_hit_gives_it_the_rest_of_the_signal(tmp_path):
     result = identify(tmp_path / "one.h5", settings=IdentifySettings(jackknife=False))
     assert [h["accepted"] for h in result.hit_rows()] == [True]
     assert result.parameters["K_V"]["value"] == pytest.approx(truth["parameters"]["K_V"]["value"], rel=2e-3)
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf])
+def test_signals_force_corrupt_over_an_impact_is_a_rejected_hit(tmp_path, bad):
+    """A NaN (or Inf) block in the force over one impact of a continuous record hid that hit's
+    trigger: the hit vanished without a word (3 hits, all accepted, no warning). The corrupt block
+    opens a record as a hit does: that hit is there, rejected as non_finite, the others as before."""
+    signal = signal_with()
+    signal[STARTS[1] - 10:STARTS[1] + 40, 0] = bad
+    got = list(iter_hits(signals_run(tmp_path, signal)))
+    assert len(got) == 4, [h.reason for h in got]
+    assert [h.accepted for h in got] == [True, False, True, True], [h.reason for h in got]
+    assert got[1].codes == ("non_finite",) and "in force" in got[1].reason
+    assert [h.start_sample for h in (got[0], got[2], got[3])] == [s + 1 - 200 for s in STARTS if s != STARTS[1]]

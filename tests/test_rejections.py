@@ -130,3 +130,51 @@ def test_frf_of_frfs_speaks_of_windows_only_when_given(frf_file, window, said):
     result = CliRunner().invoke(main, args)
     assert result.exit_code == 0, result.output
     assert ("window settings do not apply" in result.stderr) == said, result.stderr
+
+
+def test_frf_of_a_recording_with_a_run_of_no_accepted_hit_is_incomplete(tmp_path):
+    """Was: frf of a recording whose vertical run had every hit clipped showed (or wrote) the lateral
+    run's FRFs only, with exit 0 beside a warning: a run's FRFs missing with exit 0. Now the others are
+    still shown or written, the run's own reason is one line and the exit status is 1."""
+    data, _ = simulate("MRB35", config=replace(SimulationConfig(), **SMALL), seed=3)
+    runs = []
+    for run in data.runs:
+        d = np.array(run.data, dtype=float)
+        if run.name == "vertical":
+            top = 0.5 * np.max(np.abs(d[..., 0]), axis=-1, keepdims=True)
+            d[..., 0] = np.clip(d[..., 0], -top, top)
+        runs.append(replace(run, data=d))
+    path = tmp_path / "clipped_v.h5"
+    write_recording(path, replace(data, runs=tuple(runs)))
+    out = tmp_path / "frf.h5"
+    for args in ([], ["--out", str(out)]):
+        result = CliRunner().invoke(main, ["frf", str(path), *args])
+        assert result.exit_code == 1, result.output
+        (line,) = [x for x in _stderr_lines(result) if "frf incomplete" in x]
+        assert "run 'vertical': no accepted hit to average" in line
+    from guidefit.io.frf_files import read_input
+
+    assert [r.name for r in read_input(out).recording.runs] == ["lateral"]
+
+
+@pytest.mark.parametrize("factor", [0.5, 2.0])
+def test_a_sample_rate_wrong_by_a_factor_is_named(tmp_path, factor):
+    """Was: a recording whose sample rate is stated 2x too low (a MAT fs of 100 kHz for 200 kHz) gave f_V,
+    f_H half the truth, K_V, K_H a quarter, c half, exit 0 and no warning: shapes, labels and modal
+    masses come out as on the right rate. Every mode at one factor from the model's frequency is now
+    named with the rate that would put them there; the right rate gives no such warning."""
+    from guidefit.identify import identify
+
+    data, truth = simulate("MRB35", config=replace(SimulationConfig(), **SMALL), seed=3)
+    good = tmp_path / "good.h5"
+    write_recording(good, data)
+    wrong = tmp_path / "wrong.h5"
+    write_recording(wrong, replace(data, runs=tuple(replace(r, sample_rate_hz=r.sample_rate_hz * factor)
+                                                   for r in data.runs)))
+    assert not any("times the model's frequency" in w for w in identify(good).warnings)
+    result = identify(wrong)
+    assert result.parameters["K_V"]["value"] == pytest.approx(truth["parameters"]["K_V"]["value"] * factor**2,
+                                                              rel=1e-2)
+    (line,) = [w for w in result.warnings if "times the model's frequency" in w]
+    assert f"every mode found is {factor:.3g} times the model's frequency" in line
+    assert f"the recording says {200000 * factor:.9g} Hz" in line and "check the DAQ's sample rate" in line

@@ -148,9 +148,8 @@ def test_two_group_tdms_file_with_group_per_run(folder):
     text = edit(GOOD, 'source = "Hammer"', 'source = "vertical/Hammer"')
     text = edit(text, 'source = "AccA_Y"', 'source = "vertical/AccA_Y"')
     text = edit(text, 'source = "AccB_Y"', 'source = "vertical/AccB_Y"')
-    text = text.replace('file = "vertical.tdms"', 'file = "both.tdms"').replace('file = "lateral.tdms"',
-                                                                                 'file = "both.tdms"')
-    (folder / "test.toml").write_text(text)
+    text = text.replace('file = "vertical.tdms"', 'file = "both.tdms"').split("[runs.lateral]")[0]
+    (folder / "test.toml").write_text(text)  # one run: two on one hammer channel are refused (below)
     assert read_recording("test.toml").runs[0].n_samples == N
 
 
@@ -638,3 +637,33 @@ def test_help_names_test_setups(command):
     out = CliRunner().invoke(main, [command, "--help"]).output
     assert "test setup (.toml)" in " ".join(out.split()) or "test setups (.toml)" in " ".join(out.split()), out
     assert "quick start" in out
+
+
+@pytest.mark.parametrize("group", [None, '"Untitled"'])
+def test_two_runs_on_the_same_file_are_refused(folder, group):
+    """Was: a setup whose lateral run names the vertical run's file read the same hits twice under two
+    excitation directions (exit 1 with unpaired modes on a 'both' layout, or numbers from one run
+    counted twice); a run is one file or one group: one line naming both runs, exit 2."""
+    from guidefit.io.setup import SetupError
+
+    text = edit(GOOD, 'file = "lateral.tdms"', 'file = "vertical.tdms"')
+    if group:
+        text = text.replace("excitation_direction = [-1.0", f"group = {group}\nexcitation_direction = [-1.0")
+        text = text.replace('file = "vertical.tdms"\n', f'file = "vertical.tdms"\ngroup = {group}\n', 1)
+    (folder / "test.toml").write_text(text)
+    with pytest.raises(SetupError, match=r"^test.toml: runs.lateral: reads the hammer 'Hammer' of vertical.tdms as "
+                                         r"runs.vertical does; each run is its own hammer run"):
+        read_recording("test.toml")
+    result = CliRunner().invoke(main, ["identify", "test.toml"])
+    assert result.exit_code == 2 and len(result.output.strip().splitlines()) == 1, result.output
+
+
+@pytest.mark.parametrize("source, meant", [("hammer", "Hammer"), ("Hammer ", "Hammer"), ("accA_y", "AccA_Y")])
+def test_a_source_that_differs_in_case_or_spaces_names_the_channel_meant(folder, source, meant):
+    """Was: 'vertical.tdms: no channel 'AY'; the file has Hammer, AY , BY' (a trailing space in the DAQ's name
+    invisible in the list). Names still match exactly (exit 2); the line now names the channel meant."""
+    old = 'source = "AccA_Y"' if meant == "AccA_Y" else 'source = "Hammer"'
+    (folder / "test.toml").write_text(edit(GOOD, old, f"source = {json.dumps(source)}"))
+    result = CliRunner().invoke(main, ["identify", "test.toml"])
+    assert result.exit_code == 2
+    assert result.output.strip().endswith(f"did you mean '{meant}' (names are matched exactly: case and spaces count)?")

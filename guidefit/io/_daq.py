@@ -152,12 +152,17 @@ class DaqFile:
         >>> chans = tuple(DaqChannel(n, n, 10) for n in ("Hammer", "AccA_Y", "AccB_Y"))
         >>> str(DaqFile("lateral.tdms", chans, make_source=None).missing("A_Y"))
         "lateral.tdms: no channel 'A_Y'; the file has Hammer, AccA_Y, AccB_Y"
+        >>> str(DaqFile("lateral.tdms", chans, make_source=None).missing("hammer "))
+        "lateral.tdms: no channel 'hammer '; the file has Hammer, AccA_Y, AccB_Y; did you mean 'Hammer' (names \
+are matched exactly: case and spaces count)?"
         """
         names = [ch.name for ch in self.channels]
         shown = ", ".join(names[:40]) + (f", ... ({len(names)} in all)" if len(names) > 40 else "")
         note = f" ({self.note})" if self.note else ""
+        near = [n for n in names if " ".join(n.split()).casefold() == " ".join(source.split()).casefold()]
+        hint = f"; did you mean {near[0]!r} (names are matched exactly: case and spaces count)?" if near else ""
         return RecordingError(
-            f"{self.display}: no channel '{source}'; the file has {shown or 'no channels'}{note}"
+            f"{self.display}: no channel '{source}'; the file has {shown or 'no channels'}{note}{hint}"
         )
 
 

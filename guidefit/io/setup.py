@@ -538,6 +538,23 @@ def _check_all_found(setup: Setup, opened: list) -> None:
                 raise daq.missing(ch.source)
 
 
+def _check_runs_apart(setup: Setup, opened: list) -> None:
+    """Two runs whose hammer is the same channel of the same file (and group) would read the same hits
+    twice under two excitations (a run's file copied into the next run's table): one line naming both
+    and the key that settles it (each run its own ``file``, or ``group`` in a file of several runs)."""
+    seen: dict = {}
+    for run, daq, picked in opened:
+        force = next(dc for ch, dc in picked if ch.name == "force")
+        st = os.stat(run.path)
+        key = (st.st_dev, st.st_ino, force.name, repr(force.key))
+        if key in seen:
+            raise SetupError(
+                f"{setup.path}: runs.{run.name}: reads the hammer '{force.name}' of {daq.display} as runs.{seen[key]} "
+                "does; each run is its own hammer run: give it its own file (or group, in a file of several runs)"
+            )
+        seen[key] = run.name
+
+
 def _run_length(picked, daq: DaqFile) -> int:
     chans = tuple(dc for _, dc in picked)
     if daq.count_rows is not None:
@@ -674,6 +691,7 @@ def read_setup(p: Path, display: str) -> Recording:
     setup = load_setup(display)
     opened = [_open_daq(setup, run) for run in setup.runs]
     _check_all_found(setup, opened)
+    _check_runs_apart(setup, opened)
     runs = tuple(_make_run(setup, run, daq, picked) for run, daq, picked in opened)
     return Recording(path=display, guide=setup.guide, description=setup.description, runs=runs)
 

@@ -165,6 +165,25 @@ def _data_block(lines: list[tuple[int, str]], delimiter: str, decimal: str):
     return best[0], best[1], np.array(best[2])
 
 
+def _check_not_inside_data(lines, first, d, m, n_fields, display) -> None:
+    """The line taken for the header sits between rows of ``n_fields`` numbers: it is a data row with a
+    text cell (``OVL``, ``#N/A``, a second export's header), not a header; taking it as one would drop
+    every row above it without a word (a hit among them). One line naming it."""
+    if first < 2:
+        return
+    row = [_number(f, m) for f in _split(lines[first - 2][1], d)]
+    if len(row) != n_fields or any(v is None for v in row):
+        return
+    no, text = lines[first - 1]
+    fields = _split(text, d)
+    bad = next(((k, f) for k, f in enumerate(fields) if _number(f, m) is None), (0, text))
+    raise RecordingError(
+        f"{display}: line {no}: {_clip(_unquote(bad[1]).strip())!r} (field {bad[0]}) is not a number, between rows "
+        f"of numbers above and below (decimal mark '{m}'): a bad sample or two exports joined; write it as 'nan', "
+        "or cut the file there"
+    )
+
+
 def _looks_like_units(fields: list[str]) -> bool:
     texts = [_unquote(f) for f in fields]
     return any(texts) and all(_UNIT_RE.match(t) and _number(t, ".") is None for t in texts)
@@ -250,6 +269,7 @@ def _no_block(lines, display, keys, delimiter, decimal) -> Dialect:
 def _header(lines, first, d, m, n_fields, display, keys) -> Dialect:
     data_line = lines[first][0]
     above = [_split(text, d) for _, text in lines[max(0, first - 2):first]]
+    _check_not_inside_data(lines, first, d, m, n_fields, display)
     if above and all(_number(f, ".") is not None or _number(f, ",") is not None for f in above[-1]):
         raise RecordingError(
             f"{display}: line {lines[first - 1][0]} above the data rows is numbers too, but does not read "
