@@ -341,6 +341,32 @@ def _window_first(first, windows, fi, force_offset):
     return window_rows, quiet
 
 
+def _window_span(window: np.ndarray) -> tuple[int, int, np.ndarray | None]:
+    """``(a, b, w)``: the window ``window`` (n,) is 0 outside samples ``a:b``, and ``w`` is it there;
+    ``w`` None when it is 1 at every sample (a = 0, b = n). See :func:`_windowed_into`."""
+    n = window.size
+    nonzero = np.flatnonzero(window)
+    if nonzero.size == 0:
+        return 0, 0, window[:0]
+    a, b = int(nonzero[0]), int(nonzero[-1]) + 1
+    if a == 0 and b == n and bool(np.all(window == 1.0)):
+        return 0, n, None
+    return a, b, window[a:b]
+
+
+def _windowed_into(out: np.ndarray, row: np.ndarray, a: int, b: int, w: np.ndarray | None) -> None:
+    """``out[:] = row * window`` for the window of :func:`_window_span` ``(a, b, w)``, the same
+    values: a copy where it is 1 throughout, zeros where it is 0 (a force window is 0 past the
+    pulse, most of the record), so that a float32 record is multiplied by the float64 window
+    (the slow mixed-type loop) only where it must be."""
+    if w is None:
+        np.copyto(out, row)
+        return
+    np.multiply(row[a:b], w, out=out[a:b])
+    out[:a] = 0.0
+    out[b:] = 0.0
+
+
 def _block_filler(source, bufs, first, ready, window_rows, quiet, fi):
     """``fill(turn)``: windowed records into ``bufs[turn]`` (block, C, n); returns how many.
 
@@ -349,6 +375,7 @@ def _block_filler(source, bufs, first, ready, window_rows, quiet, fi):
     its channel's window while being copied (and its force offset removed with ``quiet``).
     """
     block, c = bufs[0].shape[:2]
+    plan = [_window_span(w) for w in window_rows]
 
     def fill(turn: int) -> int:
         """Windowed records into ``bufs[turn]`` (block, C, n); how many."""
@@ -367,9 +394,13 @@ def _block_filler(source, bufs, first, ready, window_rows, quiet, fi):
             for _, record in source:
                 rows = record.T
                 for ch in range(c):  # row by row: the two window rows stay in cache
-                    np.multiply(rows[ch], window_rows[ch], out=buf[k, ch])
+                    _windowed_into(buf[k, ch], rows[ch], *plan[ch])
                 if quiet is not None:  # force offset (sensor bias): out of the windowed force
-                    buf[k, fi] -= _force_offset(record[quiet, fi], buf[k, fi]) * window_rows[fi]
+                    a, b, w = plan[fi]
+                    pulse = buf[k, fi, a:b]  # the window is 0 outside: nothing to take off there
+                    offset = _force_offset(record[quiet, fi], pulse) if b > a else 0.0
+                    if offset:
+                        pulse -= offset if w is None else offset * w
                 del record, rows  # the hit's buffer may be reused (guidefit.hits._rows_buffer)
                 k += 1
                 if k == block:
