@@ -359,7 +359,7 @@ LAYERS = (
                   "guidefit.sensor_signs", "guidefit.hammer_check", "guidefit.plan", "guidefit.predict")),
     ("explain", ("guidefit.nonlinear", "guidefit.explain")),
     ("products", ("guidefit.report", "guidefit.export", "guidefit.machine")),
-    ("command", ("guidefit.cli", "guidefit.__main__")),
+    ("command", ("guidefit.cli", "guidefit.batch", "guidefit.__main__")),
 )
 #: Imports that go up a layer, each with its reason.
 UPWARD_ALLOWED = {
