@@ -789,8 +789,9 @@ def convert_cmd(source, out_path, compression):
 @click.option("--runs", default="vertical,lateral", show_default=True, help="Runs to simulate, comma-separated.")
 @click.option("--record-length", "record_s", default=0.1, show_default=True, type=float,
               help="Record length per hit, s.")
-@click.option("--force", "force_n", default="200,500", show_default=True, metavar="MIN,MAX",
-              help="Range of the hits' peak forces, N.")
+@click.option("--force", "force_n", default=None, metavar="MIN,MAX",
+              help="Range of the hits' peak forces, N.  [default: 200,500, or less for a carriage that "
+                   "would drive the accelerometers past half their range: chosen and said]")
 @click.option("--layout", type=click.Choice(["hits", "signals"]), default="hits", show_default=True,
               help="One pre-triggered record per hit, or one continuous record.")
 @click.option("--ideal", is_flag=True, help="No sensor noise, no quantisation, no clipping.")
@@ -808,6 +809,8 @@ def simulate_cmd(guide_name, out_path, effects, faults, hits, seed, file_format,
     config = config_from_options(runs=runs, hits=hits, record_s=record_s, force_n=force_n, layout=layout,
                                  faults=faults, ideal=ideal, sensor_layout=sensor_layout, hit_points=hit_points)
     out = write_simulation(out_path, guide_name, effects, config, seed, file_format=file_format, progress=True)
+    if "force_choice" in out.truth:
+        click.echo(out.truth["force_choice"]["message"])
     for path in out.recordings:
         click.echo(f"wrote {path}")
     click.echo(f"truth in {out.truth_path} (never read by identify)")

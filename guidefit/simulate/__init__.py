@@ -19,8 +19,9 @@ support-body mode 2 %).
 puts the first zero of its spectrum at ``1.5 / T = 15 kHz`` and its -3 dB
 point at about ``0.6 / T = 6 kHz``, above every carriage mode. The hit point and direction are
 those of the run; the peak force of each hit is drawn uniformly from
-``SimulationConfig.force_n``; the onset lies at a random sub-sample instant
-just before the trigger sample.
+``SimulationConfig.force_n`` (None: 200-500 N, or less for a carriage whose
+accelerometers would pass half their range, :mod:`guidefit.simulate.levels`);
+the onset lies at a random sub-sample instant just before the trigger sample.
 
 *Linear response (exact).* Each mode obeys
 ``eta'' + 2 zeta w eta' + w^2 eta = b_k F(t)`` with ``b_k = d . R(p) phi_k``
@@ -195,8 +196,11 @@ class SimulationConfig:
         Excitation set-ups; default :data:`DEFAULT_RUNS` (vertical, lateral).
     hits : int
         Hits per run.
-    force_n : (float, float)
-        Range of the hits' peak forces (N), drawn uniformly per hit.
+    force_n : (float, float) or None
+        Range of the hits' peak forces (N), drawn uniformly per hit. None (the
+        default): chosen for the carriage (:mod:`guidefit.simulate.levels`):
+        200-500 N unless that would drive an accelerometer past half its
+        range, then less (and ``force_range_n`` scaled with it).
     pulse_s : float
         Half-sine pulse duration T (s); 0.1 ms is a steel tip.
     sample_rate_hz, record_s, pretrigger_s : float
@@ -236,7 +240,7 @@ class SimulationConfig:
 
     runs: tuple = DEFAULT_RUNS
     hits: int = 8
-    force_n: tuple[float, float] = (200.0, 500.0)
+    force_n: tuple[float, float] | None = None
     pulse_s: float = 1.0e-4
     sample_rate_hz: float = 200_000.0
     record_s: float = 0.1
@@ -345,9 +349,10 @@ def _check_config(config: SimulationConfig, guide) -> None:
 
     if not isinstance(config.hits, int) or config.hits < 1:
         bad("hits", config.hits, "must be a positive integer")
-    lo, hi = config.force_n
-    if not 0 < lo <= hi:
-        bad("force_n", config.force_n, "must be (min, max) with 0 < min <= max")
+    if config.force_n is not None:
+        lo, hi = config.force_n
+        if not 0 < lo <= hi:
+            bad("force_n", config.force_n, "must be (min, max) with 0 < min <= max")
     for name in ("pulse_s", "sample_rate_hz", "record_s", "force_range_n", "acc_range_m_s2"):
         value = getattr(config, name)
         if not (math.isfinite(value) and value > 0):
@@ -540,7 +545,7 @@ def simulate(guide, effects=(), config: SimulationConfig | None = None, seed: in
     """
     from guidefit.io import RecordingData
 
-    guide, config, faults, model = _prepare(guide, effects, config)
+    guide, config, faults, model, choice = _prepare(guide, effects, config)
     runs, runs_truth = [], {}
     with progress_bar("simulating hits", len(config.runs) * config.hits, enabled=progress) as bar:
         for run in config.runs:
@@ -550,7 +555,7 @@ def simulate(guide, effects=(), config: SimulationConfig | None = None, seed: in
             runs.append(_run_data(config, model.guide, run, data))
             runs_truth[run.name] = _run_truth(run, hits_truth)
     recording = RecordingData(runs=tuple(runs), guide=guide_reference(guide), description=_description(seed))
-    return recording, _truth(model, config, seed, runs_truth, faults)
+    return recording, _truth(model, config, seed, runs_truth, faults, choice)
 
 
 def _description(seed: int) -> str:
@@ -567,7 +572,21 @@ def _prepare(guide, effects, config):
             raise ModelError(f"fault {f.name}: run '{f.parameters['run']}' not simulated; "
                              f"have {', '.join(r.name for r in config.runs)}")
     _check_loose_sensors(faults, _layout(config, guide))
-    return guide, config, faults, build_model(guide, effects, config.damping)
+    model = build_model(guide, effects, config.damping)
+    config, choice = _choose_forces(config, model)
+    return guide, config, faults, model, choice
+
+
+def _choose_forces(config, model):
+    """``(config, ForceChoice or None)``: the hit forces chosen for the carriage when none are
+    given (:func:`guidefit.simulate.levels.choose_forces`)."""
+    from guidefit.simulate.levels import choose_forces
+
+    sensors = {}
+    for run in config.runs:
+        _names, _units, positions, directions = _channels(config, model.guide, run)
+        sensors[run.name] = (positions[1:], directions[1:])
+    return choose_forces(config, model, sensors)
 
 
 def _check_loose_sensors(faults, layout: dict) -> None:
@@ -647,7 +666,7 @@ def _stream_h5(path: Path, guide, effects, config, seed: int, progress: bool) ->
     """Write a ``signals`` simulation to HDF5 block by block (bounded memory); return the truth."""
     from guidefit.io import open_signals_writer
 
-    guide, config, faults, model = _prepare(guide, effects, config)
+    guide, config, faults, model, choice = _prepare(guide, effects, config)
     runs_truth = {}
     with progress_bar("simulating hits", len(config.runs) * config.hits, enabled=progress) as bar:
         for k, run in enumerate(config.runs):
@@ -658,10 +677,10 @@ def _stream_h5(path: Path, guide, effects, config, seed: int, progress: bool) ->
                 for block in _iter_run(model, config, run, seed, faults, hits_truth, bar.advance):
                     writer.append(block)
             runs_truth[run.name] = _run_truth(run, hits_truth)
-    return _truth(model, config, seed, runs_truth, faults)
+    return _truth(model, config, seed, runs_truth, faults, choice)
 
 
-def _truth(model: _Model, config, seed, runs_truth, faults) -> dict:
+def _truth(model: _Model, config, seed, runs_truth, faults, choice=None) -> dict:
     from guidefit import __version__
 
     sol, zeta, mass = model.solution, model.damping, model.guide.mass_kg
@@ -702,6 +721,10 @@ def _truth(model: _Model, config, seed, runs_truth, faults) -> dict:
         "config": config.to_dict(),
         "notes": notes,
     }
+    if choice is not None:  # only when the default forces would have clipped: MRB35's truth is unchanged
+        truth["force_choice"] = {"message": choice.message(), "force_n": list(choice.force_n),
+                                 "force_range_n": choice.force_range_n,
+                                 "default_peak_m_s2": choice.default_peak_m_s2, "peak_m_s2": choice.peak_m_s2}
     if model.contacts is not None:
         truth["static_equilibrium_q"] = [float(x) for x in model.contacts.q0]
         truth["preload_m"] = model.contacts.preload_m

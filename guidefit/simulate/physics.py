@@ -461,24 +461,13 @@ def hit_response(model: _Model, position_m, direction, pulses, t_s, sensor_posit
     >>> f.shape, a.shape, round(float(f.max()), 1)
     ((400,), (400, 1), 100.0)
     """
-    from guidefit.model import vibration as vib
-
     t_int = np.asarray(t_s, float)
-    d = np.asarray(direction, float)
-    d = d / np.linalg.norm(d)
-    sol = model.solution
-    from guidefit.modes.labels import Sensor, sensor_matrix
-
-    sensor_rows = sensor_matrix([Sensor("", p, dr) for p, dr in zip(sensor_positions_m, sensor_directions)])
-    b_q = np.zeros(sol.shapes.shape[0])
-    b_q[:5] = d @ vib.rigid_body_map(position_m)
     if model.contacts is None:
-        b = b_q @ sol.shapes  # modal participation of the hammer
-        eta_dd = half_sine_modal_acceleration(t_int, sol.frequencies_hz, model.damping, pulses) * b
-        acc = eta_dd @ (sensor_rows @ sol.shapes[:5]).T
+        acc = linear_acceleration(model, position_m, direction, pulses, t_int, sensor_positions_m, sensor_directions)
     else:
+        b_q, sensor_rows = _hammer_and_sensors(model, position_m, direction, sensor_positions_m, sensor_directions)
         q_dd = integrate_contacts(model.contacts, b_q, pulses, t_int, substeps=substeps,
-                                  tolerance=tolerance, solution=sol, damping=model.damping)
+                                  tolerance=tolerance, solution=model.solution, damping=model.damping)
         acc = q_dd[:, :5] @ sensor_rows.T
     force = np.zeros(len(t_int))
     for f0, t0, dur in pulses:
@@ -486,3 +475,40 @@ def hit_response(model: _Model, position_m, direction, pulses, t_s, sensor_posit
         inside = (tau > 0) & (tau < dur)
         force[inside] += f0 * np.sin(math.pi * tau[inside] / dur)
     return force, acc
+
+
+def _hammer_and_sensors(model: _Model, position_m, direction, sensor_positions_m, sensor_directions):
+    """Generalised force per newton of hammer force (n_dof,) and the sensors' rows (n_s, 5)."""
+    from guidefit.model import vibration as vib
+    from guidefit.modes.labels import Sensor, sensor_matrix
+
+    d = np.asarray(direction, float)
+    d = d / np.linalg.norm(d)
+    sensor_rows = sensor_matrix([Sensor("", p, dr) for p, dr in zip(sensor_positions_m, sensor_directions)])
+    b_q = np.zeros(model.solution.shapes.shape[0])
+    b_q[:5] = d @ vib.rigid_body_map(position_m)
+    return b_q, sensor_rows
+
+
+def linear_acceleration(model: _Model, position_m, direction, pulses, t_s, sensor_positions_m,
+                        sensor_directions) -> np.ndarray:
+    """Sensor accelerations (n_t, n_s) of the linear (small-amplitude) model under half-sine pulses.
+
+    The exact modal response of :func:`half_sine_modal_acceleration`; for a
+    model with nonlinear contacts, that of its linearisation at the static
+    equilibrium (what :func:`hit_response` gives for a vanishing hit).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> model = build_model("MRB35")
+    >>> t = np.arange(400) / 200e3
+    >>> a = linear_acceleration(model, (0, 0, 0), (0, -1, 0), [(100.0, 1e-4, 1e-4)], t, [(0.03, 0, 0.045)], [(0, 1, 0)])
+    >>> a.shape, bool(np.abs(a).max() > 10)
+    ((400, 1), True)
+    """
+    sol = model.solution
+    b_q, sensor_rows = _hammer_and_sensors(model, position_m, direction, sensor_positions_m, sensor_directions)
+    b = b_q @ sol.shapes  # modal participation of the hammer
+    eta_dd = half_sine_modal_acceleration(np.asarray(t_s, float), sol.frequencies_hz, model.damping, pulses) * b
+    return eta_dd @ (sensor_rows @ sol.shapes[:5]).T
