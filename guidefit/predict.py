@@ -126,6 +126,7 @@ def predict(guide, load=None, calibration: str = "nominal") -> Prediction:
 
 #: ``--sweep`` quantities: option name -> (index in the load vector, column, unit).
 SWEEP_QUANTITIES = {"FV": (0, "F_V_n", "N"), "FH": (1, "F_H_n", "N"), "M": (2, "M_gamma_nm", "N m")}
+SWEEP_QUANTITIES_COLUMNS = tuple(column for _, column, _ in SWEEP_QUANTITIES.values())
 MAX_SWEEP_POINTS = 1000
 """Largest number of loads in a sweep (each is a static solution and an eigenproblem)."""
 
@@ -195,12 +196,14 @@ def predict_sweep(guide, calibration: str = "nominal", direction_load=None, n: i
             load = base.copy()
             load[index] = value
             loads.append(load)
-        frame = static.sweep(guide, loads, calibration=calibration)
+        frame = static.sweep(guide, loads, calibration=calibration, stop_at_limit=True)
         described = {"quantity": column, "unit": unit, "from": float(start), "to": float(stop), "n": int(n)}
     else:
-        frame = static.sweep(guide, direction_load=direction_load, n=n, calibration=calibration)
+        frame = static.sweep(guide, direction_load=direction_load, n=n, calibration=calibration, stop_at_limit=True)
+        stopped = frame.attrs.get("stopped_at")
+        last = stopped["value"] * (n - 1) / stopped["index"] if stopped else float(frame.iloc[-1, 0])
         described = {"quantity": frame.columns[0], "unit": "N m" if frame.columns[0] == "load_nm" else "N",
-                     "from": float(frame.iloc[0, 0]), "to": float(frame.iloc[-1, 0]), "n": int(len(frame))}
+                     "from": float(frame.iloc[0, 0]), "to": last, "n": int(n)}
         column = frame.columns[0]
     frame = frame.rename(columns={"K_V_n_per_m": "K_V_static_n_per_m", "K_H_n_per_m": "K_H_static_n_per_m",
                                   "K_gamma_nm_per_rad": "K_gamma_static_nm_per_rad"})
@@ -209,7 +212,81 @@ def predict_sweep(guide, calibration: str = "nominal", direction_load=None, n: i
     frame["K_V_apparent_n_per_m"] = [a["K_V"] for a in apparent]
     frame["K_H_apparent_n_per_m"] = [a["K_H"] for a in apparent]
     frame.attrs["sweep"] = {**described, "column": column}
+    frame.attrs["limit"] = None
+    if "stopped_at" in frame.attrs:
+        frame.attrs["limit"] = sweep_limit(guide, frame, calibration)
     return frame
+
+
+#: Names of the swept load in the lift-off message (column -> name).
+_LOAD_NAMES = {"F_V_n": "F_V", "F_H_n": "F_H", "M_gamma_nm": "M_gamma", "load_n": "load", "load_nm": "moment"}
+
+
+def sweep_limit(guide, frame, calibration: str = "nominal", rtol: float = 1e-7) -> dict:
+    """Where and why a sweep ended early: the largest load the static model can hold.
+
+    ``frame`` is a sweep that stopped (``frame.attrs["stopped_at"]`` of
+    :func:`guidefit.model.static.sweep`): between its last load and the one it
+    could not hold, bisection on the straight path finds the limit to ``rtol``
+    of that step. Returns a JSON-ready dictionary: ``value`` (the limit along
+    the sweep, in ``unit``), ``quantity`` (the column swept), ``load``
+    (F_V_n, F_H_n, M_gamma_nm there), ``rows_lifted`` just past it, ``reason``,
+    ``message`` (one line), ``points_computed``, ``points_requested``.
+
+    >>> from guidefit.model.guides import load_guide
+    >>> frame = predict_sweep(load_guide("MRB35"), sweep=("FV", 0.0, 3000.0, 4))
+    >>> len(frame), round(frame.attrs["limit"]["value"])
+    (2, 1071)
+    """
+    from guidefit.errors import ModelError
+    from guidefit.model import static
+
+    stopped = frame.attrs["stopped_at"]
+    sweep = frame.attrs.get("sweep", {})
+    column = sweep.get("column", frame.columns[0])
+    last = frame.iloc[-1]
+    good = np.array([last["F_V_n"], last["F_H_n"], last["M_gamma_nm"]], dtype=float)
+    bad = np.asarray(stopped["load"], dtype=float)
+    lo, hi = 0.0, 1.0
+
+    def holds(t):
+        try:
+            static.tangent_stiffness(guide, good + t * (bad - good), calibration)
+        except ModelError:
+            return False
+        return True
+
+    while hi - lo > rtol:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if holds(mid) else (lo, mid)
+    limit, beyond = good + lo * (bad - good), good + hi * (bad - good)
+    if column in SWEEP_QUANTITIES_COLUMNS:  # --sweep Q:FROM:TO:N: the swept component
+        i = SWEEP_QUANTITIES_COLUMNS.index(column)
+        v_good, v_bad = good[i], bad[i]
+    else:  # bare --sweep: the load along the sweep, the frame's first column
+        v_good, v_bad = float(last.iloc[0]), stopped["value"]
+    value = float(v_good + lo * (v_bad - v_good))
+    unit = sweep.get("unit", "N m" if column.endswith("_nm") else "N")
+    name = _LOAD_NAMES.get(column, column)
+    where = f"{name} = {value:.4g} {unit}"
+    if name in ("load", "moment") and np.count_nonzero(limit) > 1:
+        where += f" (F_V = {limit[0]:.4g} N, F_H = {limit[1]:.4g} N, M_gamma = {limit[2]:.4g} N m)"
+    computed, requested = len(frame), int(sweep.get("n", stopped["index"] + 1))
+    try:
+        rows = list(static.solve_equilibrium(guide, beyond, calibration).rows_lifted)
+    except ModelError as exc:  # capacity or no equilibrium: the static model's own reason
+        rows, reason = [], str(exc).split(": ", 1)[-1]
+        message = f"the contacts cannot carry the load above {where} ({reason}): the sweep ends there"
+    else:
+        lifted = ("rollers lift off" if not rows else f"row {rows[0]} lifts off" if len(rows) == 1
+                  else f"rows {', '.join(map(str, rows))} lift off")
+        reason = f"{lifted}: the rollers left in contact cannot hold the carriage (tangent stiffness singular)"
+        message = f"{lifted} above {where} and the rest cannot hold the carriage: the sweep ends there"
+    message += f" ({computed} of {requested} loads computed)"
+    return {"value": value, "quantity": column, "unit": unit,
+            "load": {"F_V_n": float(limit[0]), "F_H_n": float(limit[1]), "M_gamma_nm": float(limit[2])},
+            "rows_lifted": rows, "reason": reason, "message": message,
+            "points_computed": computed, "points_requested": requested}
 
 
 def sweep_document(frame, guide_name: str, calibration: str) -> dict:
@@ -218,7 +295,7 @@ def sweep_document(frame, guide_name: str, calibration: str) -> dict:
     return {"guide": guide_name, "calibration": calibration, "sweep": frame.attrs.get("sweep", {}),
             "stiffness_meaning": {"K_*_static": STIFFNESS_KINDS["static_at_load"],
                                   "K_*_apparent": STIFFNESS_KINDS["apparent_single_dof"]},
-            "rows": frame.to_dict(orient="records")}
+            "rows": frame.to_dict(orient="records"), "limit": frame.attrs.get("limit")}
 
 
 from guidefit._api import make_callable  # noqa: E402

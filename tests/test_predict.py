@@ -133,3 +133,43 @@ def test_sweep_plot_axes_say_their_units(tmp_path, monkeypatch):
     labels = [(ax.get_xlabel(), ax.get_ylabel()) for ax in figures[0].ravel()]
     assert labels == [("F_H (N)", "natural frequency (Hz)"), ("F_H (N)", "stiffness (N/m)")]
     assert (tmp_path / "s.png").stat().st_size > 10_000
+
+
+# --------------------------------------------------------------------------- a sweep past lift-off
+
+
+def test_sweep_past_lift_off_gives_the_loads_up_to_it_and_says_where_it_ends(tmp_path):
+    # before: FV 0..3000 N on MRB35 failed whole (exit 2) at 1500 N, where rows 3 and 4 have lifted off
+    from guidefit.model import static
+
+    lift = static.lift_off_load(MRB35)  # 1071 N: F = 2 Z sin(b) Q(2 Delta), tests/test_static.py
+    plot = tmp_path / "sweep.png"
+    code, out, err = _cli("predict", "--sweep", "FV:0:3000:7", "--plot", plot)
+    assert code == 0, err
+    lines = [line for line in out.splitlines() if "sweep ends there" in line]
+    assert len(lines) == 1 and "rows 3, 4 lift off above F_V = 1071 N" in lines[0], out
+    assert "(3 of 7 loads computed)" in lines[0] and plot.stat().st_size > 0
+    code, out, err = _cli("predict", "--json", "--sweep", "FV:0:3000:7")
+    assert code == 0, err
+    doc = json.loads(out)
+    assert [r["F_V_n"] for r in doc["rows"]] == pytest.approx([0.0, 500.0, 1000.0])
+    limit = doc["limit"]
+    assert limit["value"] == pytest.approx(lift, rel=1e-6) and limit["unit"] == "N"
+    assert limit["quantity"] == "F_V_n" and limit["rows_lifted"] == [3, 4]
+    assert (limit["points_computed"], limit["points_requested"]) == (3, 7)
+    assert err.strip().splitlines() == [f"warning: {limit['message']}"]
+    # the points computed are those of the sweep that stops short of lift-off
+    short = predict_sweep(MRB35, sweep=("FV", 0.0, 1000.0, 3))
+    assert [r["f_vertical_hz"] for r in doc["rows"]] == pytest.approx(list(short["f_vertical_hz"]), rel=1e-12)
+    assert short.attrs["limit"] is None and _json("--sweep", "FV:0:900:4")["limit"] is None
+
+
+def test_bare_sweep_to_a_load_past_lift_off_ends_there_too():
+    doc = _json("--sweep", "--load", "3000,0,0")
+    assert len(doc["rows"]) == 8 and doc["limit"]["value"] == pytest.approx(1071, rel=1e-3)
+    assert doc["sweep"]["to"] == pytest.approx(3000.0) and doc["sweep"]["n"] == 21
+
+
+def test_sweep_whose_first_load_cannot_be_held_is_one_line_exit_2():
+    code, _, err = _cli("predict", "--sweep", "FV:-60000:0:7")
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "do not restrain" in err, err

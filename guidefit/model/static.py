@@ -857,7 +857,8 @@ def plot_load_deflection(frames, path) -> None:
 # --------------------------------------------------------------------------- sweeps for predict
 
 
-def sweep(guide, loads=None, *, direction_load=None, n: int = 21, calibration: str = "nominal"):
+def sweep(guide, loads=None, *, direction_load=None, n: int = 21, calibration: str = "nominal",
+          stop_at_limit: bool = False):
     """Static stiffness and natural frequencies over a range of loads (``guidefit predict --sweep``).
 
     At each load the static model (:func:`tangent_stiffness`) gives every
@@ -874,6 +875,14 @@ def sweep(guide, loads=None, *, direction_load=None, n: int = 21, calibration: s
     direction_load : (F_V, F_H, M_gamma), optional
     n : int
     calibration : {"nominal", "law"}
+    stop_at_limit : bool
+        At the first load after the first that the model cannot hold (rows
+        lifted so that the rest cannot restrain the carriage, capacity, no
+        equilibrium: :func:`tangent_stiffness` raises) end the sweep there
+        instead of raising: the frame holds the loads before it and
+        ``frame.attrs["stopped_at"]`` = ``{"index", "load", "value", "error"}``
+        (``value``: that load along the sweep, the first column). A first
+        load that cannot be held raises either way.
 
     Returns
     -------
@@ -917,8 +926,15 @@ def sweep(guide, loads=None, *, direction_load=None, n: int = 21, calibration: s
         first = ("load_nm", np.array([x[2] for x in loads]))
     base = vib.model_from_guide(guide)
     records = []
-    for x in loads:
-        st = tangent_stiffness(guide, x, calibration)
+    for i, x in enumerate(loads):
+        try:
+            st = tangent_stiffness(guide, x, calibration)
+        except ModelError as exc:
+            if not (stop_at_limit and records):
+                raise
+            stopped = {"index": i, "load": tuple(float(v) for v in x), "value": float(first[1][i]),
+                       "error": str(exc)}
+            break
         sol = vib.solve_modes(vib.with_roller_stiffness(base, st.roller_stiffness_n_per_m))
         rec = {
             "F_V_n": x[0], "F_H_n": x[1], "M_gamma_nm": x[2],
@@ -930,7 +946,11 @@ def sweep(guide, loads=None, *, direction_load=None, n: int = 21, calibration: s
         rec["rows_lifted"] = ",".join(map(str, st.rows_lifted))
         rec["n_rows_lifted"] = len(st.rows_lifted)
         records.append(rec)
+    else:
+        stopped = None
     frame = pd.DataFrame(records)
-    frame.insert(0, first[0], first[1])
+    frame.insert(0, first[0], first[1][: len(records)])
     frame.attrs.update(guide=guide.name, calibration=calibration)
+    if stopped is not None:
+        frame.attrs["stopped_at"] = stopped
     return frame

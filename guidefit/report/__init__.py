@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 
 
 def _console(stderr: bool = False):
@@ -142,10 +143,13 @@ def render_sweep(frame, as_json: bool = False, plot_path: str | None = None, gui
     columns, or as ONE JSON document (:func:`guidefit.predict.sweep_document`); optional plot."""
     from guidefit.predict import sweep_document
 
+    limit = frame.attrs.get("limit")
     if plot_path:
         _save_figure(lambda path: plot_sweep(frame, path), plot_path)
     if as_json:
         print(dump_json(sweep_document(frame, guide_name, calibration)))
+        if limit:  # stdout is the one JSON document; the user still reads why the sweep is short
+            print(f"warning: {limit['message']}", file=sys.stderr)
         return
     console = console or _console()
     column, label, unit = _sweep_axis(frame)
@@ -162,6 +166,8 @@ def render_sweep(frame, as_json: bool = False, plot_path: str | None = None, gui
     console.print(table)
     console.print("stat: static tangent stiffness at the load (Eq. 1-4); app: apparent 1-DOF 4 pi^2 M f^2 "
                   "(Eq. 24-25, what identify reports); f_H: the roll_low mode.", highlight=False)
+    if limit:
+        console.print(limit["message"], highlight=False, markup=False, soft_wrap=True)
     if plot_path:
         console.print(f"plot written to {plot_path}")
 
@@ -229,6 +235,12 @@ def plot_sweep(frame, path: str) -> None:
     axes[0, 1].set_ylabel("stiffness (N/m)")
     axes[0, 1].set_yscale("log")
     axes[0, 1].set_title("static tangent (Eq. 1-4) and apparent 1-DOF (Eq. 24-25)", fontsize=9)
+    limit = frame.attrs.get("limit")
+    if limit:  # the sweep ended where the static model can no longer hold the load
+        for ax in axes[0]:
+            ax.axvline(limit["value"], color="k", linestyle=":",
+                       label=f"limit {limit['value']:.4g} {limit['unit']}")
+        fig.suptitle(limit["message"], fontsize=8)
     axes[0, 1].legend()
     fig.tight_layout()
     fig.savefig(path, dpi=110)
