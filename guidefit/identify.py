@@ -62,6 +62,7 @@ from guidefit.identify_runs import (
     _frequency_scale_warnings,
     _hit_row,
     _quality_warnings,
+    amplitude_dependence,
     dead_channel_warnings,
     frf_channels,
 )
@@ -704,6 +705,10 @@ def conclude(path, recording, guide, model, settings: IdentifySettings, fit: Mod
     # modes that are found but not named (ambiguous) count as missing for the gate
     not_named = [lab for lab in model.labels if lab not in {m.label for m in modes} and not lab.startswith("support")]
     gate = fit.check.unresolved or consistency.plausibility(modes, not_named, sets, model)
+    amplitude = _amplitude_lines(fit, runs, settings, gate is not None)
+    warnings = (*amplitude, *warnings)
+    if gate is not None and amplitude:
+        gate = f"{amplitude[0]}; {gate}"
     if gate is None and neither:  # modes found, none of them the vertical or the horizontal joint mode
         gate = (f"neither the vertical nor the horizontal joint mode was found among the {len(res.modes)} "
                 f"labelled and {len(res.extras)} other modes: the recording does not look like a carriage on "
@@ -726,6 +731,29 @@ def conclude(path, recording, guide, model, settings: IdentifySettings, fit: Mod
                           tuple(res.extras), tuple(res.missing), tuple(failed_rows), hits_checked=hits_checked,
                           modal=res, gate=gate, sensor_faults=fit.check.faults, unidentified=unidentified,
                           recording=recording if hits_checked else None)
+
+
+def _amplitude_lines(fit: ModalFit, runs, settings: IdentifySettings, rejected: bool) -> tuple:
+    """Amplitude dependence (:func:`guidefit.identify_runs.amplitude_dependence`) of each fitted run, looked
+    for only when the fit failed its gate or the labeller found the modes in antiphase with the model's
+    while the driving points are signed right: one linear model does not fit, and this says why."""
+    res = fit.passed.modal
+    if not rejected and (res is None or not res.antiphase_signed_right):
+        return ()
+    run_of = {run.name: run for run, _, _ in fit.collected}
+    out = []
+    for r in runs:
+        if r.name not in run_of or res is None or r.name not in res.fit.runs:
+            continue
+        views = [replace(m, run=r.name, fit=res.fit.run_mode(m.global_index, r.name)) for m in res.modes + res.extras]
+        size = {id(v): float(np.linalg.norm(list(m.shapes.get(r.name, {}).values()) or [0.0]))
+                for v, m in zip(views, res.modes + res.extras)}
+        top = max(size.values(), default=0.0)
+        strong = [v for v in views if top > 0 and size[id(v)] >= 0.1 * top]  # the modes this run's hammer drives
+        line = amplitude_dependence(run_of[r.name], r, strong, settings)
+        if line is not None:
+            out.append(line)
+    return tuple(out)
 
 
 def _unidentified(joint: dict, model, sets, modes, lost=()) -> tuple:  # modes: the named ones and the extras

@@ -440,6 +440,48 @@ def _force_levels(run, frf, rows, modes, settings) -> tuple[list[dict], list[str
     return levels, []
 
 
+#: a mode whose softest and hardest force bins differ by more than this fraction (and 3 std) moves with force
+AMPLITUDE_SHIFT = 2e-3
+
+
+def amplitude_dependence(run, result, modes, settings) -> str | None:
+    """One line when a run's modes move with its hits' force (amplitude dependence), else None.
+
+    ``result`` is the run's RunResult (its hits and FRF, and its ``force_levels``
+    when identify made them), ``modes`` the global modes as this run sees them
+    (its own refit of a mode that moves with force may have failed). Its accepted hits' peak forces
+    must differ by ``settings.min_force_ratio``; each labelled mode is refitted
+    in the softest and the hardest force bin (:func:`_force_levels`) and the
+    largest move beyond ``max(3 std, AMPLITUDE_SHIFT f)`` is named with the
+    forces. A hammer reversed moves no frequency: this tells the two apart.
+    """
+    forces = [r["peak_force_n"] for r in result.hits if r.get("accepted")]
+    if not modes or len(forces) < 2 or max(forces) < settings.min_force_ratio * min(forces):
+        return None
+    levels = result.force_levels or _force_levels(run, result.frf, result.hits, modes, settings)[0]
+    best = None
+    for label in dict.fromkeys(lv["label"] for lv in levels):
+        own = sorted((lv for lv in levels if lv["label"] == label), key=lambda lv: lv["level"])
+        soft, hard = own[0], own[-1]
+        if soft is hard or soft["frequency_hz"] is None or hard["frequency_hz"] is None:
+            continue
+        shift = hard["frequency_hz"] - soft["frequency_hz"]
+        std = math.hypot(soft["frequency_std_hz"] or 0.0, hard["frequency_std_hz"] or 0.0)
+        if abs(shift) > max(3.0 * std, AMPLITUDE_SHIFT * soft["frequency_hz"]):
+            if best is None or abs(shift) / soft["frequency_hz"] > abs(best[3]) / best[1]["frequency_hz"]:
+                best = (label, soft, hard, shift)
+    if best is None:
+        return None
+    label, soft, hard, shift = best
+    return (f"run '{result.name}': amplitude dependence: the hits' peak forces range from {min(forces):.0f} to "
+            f"{max(forces):.0f} N ({max(forces) / min(forces):.1f}x), and the {label} mode moves from "
+            f"{soft['frequency_hz']:.0f} Hz (softest hits, mean {soft['peak_force_n']:.0f} N) to "
+            f"{hard['frequency_hz']:.0f} Hz (hardest, mean {hard['peak_force_n']:.0f} N; "
+            f"{100 * shift / soft['frequency_hz']:+.1f} %): the carriage's contacts change with the force, so "
+            "one linear model does not fit these hits (not a reversed hammer); guidefit explain compares the "
+            "force levels (docs/identify.md, 'force levels'), and hits of one force give a linear result")
+
+
 MIN_RELATIVE_AMPLITUDE = 5e-3
 MAX_RELATIVE_FREQUENCY_STD = 3e-2
 

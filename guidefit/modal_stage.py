@@ -88,6 +88,10 @@ class ModalResult:
     per_run: dict = field(default_factory=dict)  # run -> [Mode or None per global mode]
     band_hz: tuple = ()
     warnings: tuple = ()  # what the fit and the labeller found, one line each
+    #: runs the labeller read at the opposite sign to the model's ("*": the whole recording) while their
+    #: driving-point residues are positive (the hammer and accelerometers signed right): the modes do not
+    #: fit one linear model of the carriage (identify looks for amplitude dependence: its force levels)
+    antiphase_signed_right: tuple = ()
 
 
 def geometry_of(run, frf) -> RunGeometry:
@@ -461,19 +465,68 @@ def _candidate(gf, k, sensors, drive, mass) -> dict:
             "energy": energy_shares(qn, mass), "constants": constants, "primary": primary}
 
 
-def _scale_warnings(ev, mass_kg: float) -> list[str]:
+#: a run's driving-point residues are told from its sensors when the hit point's row lies in the span of
+#: its sensor rows to this relative residual
+DRIVE_SPAN_TOLERANCE = 0.05
+
+
+def driving_point_signs(candidates, views: dict) -> dict:
+    """Run -> +1 or -1, the sign of the run's driving-point residues, or None when its sensors cannot tell.
+
+    A mode's modal constants in run j are ``(S_j q)(g_j . q)``; the rigid fit
+    ``p = S_j^+ c`` gives ``g_j . p = (g_j . q)^2``, the driving-point
+    residue, positive for any mode of a correctly signed test whatever the
+    model says. Its sum over the modes (the strongest carry it; a weak mode
+    of another run's hammer is noise) is the run's sign: -1 only when the
+    hammer's direction, or every accelerometer's, is reversed. None when the
+    run's hit point is unknown or its hammer's row is outside what its sensors
+    read (:data:`DRIVE_SPAN_TOLERANCE`).
+    """
+    out = {}
+    for name, view in views.items():
+        g = view.drive
+        if g is None:
+            out[name] = None
+            continue
+        pinv = np.linalg.pinv(view.sensors)
+        if np.linalg.norm(g - g @ pinv @ view.sensors) > DRIVE_SPAN_TOLERANCE * np.linalg.norm(g):
+            out[name] = None
+            continue
+        total = sum(float(g @ pinv @ np.asarray(c["constants"][name], float))
+                    for c in candidates if name in c["constants"])
+        out[name] = None if total == 0 else (1 if total > 0 else -1)
+    return out
+
+
+def _scale_warnings(ev, mass_kg: float, signs: dict | None = None) -> tuple[list[str], tuple]:
     """What the labeller's scales say (:class:`guidefit.modes.labels.Evidence`): the whole recording, or one
-    run against the others, off by a unit factor or reversed in sign. K and c do not depend on either."""
+    run against the others, off by a unit factor or reversed in sign. K and c do not depend on either.
+
+    A reversed sign is said to be the hammer's (or every accelerometer's) only when the run's
+    driving-point residues (``signs``, :func:`driving_point_signs`) do not contradict it; with them
+    positive the modes are in antiphase with the model's, not the test: such runs are returned
+    too (:attr:`ModalResult.antiphase_signed_right`)."""
     from guidefit.consistency import scale_factor_hint
     from guidefit.modes.labels import COMMON_SCALE_FACTOR
 
+    signs = signs or {}
     reversed_ = "the excitation_direction, or every accelerometer's direction, is reversed"
-    out = []
+    signed_right = ("yet the driving-point residues (the hit point's motion along the hammer, from the sensors' "
+                    "rigid fit) are positive{}: the hammer and the accelerometers are signed right, and the "
+                    "modes do not fit the model's at one sign")
+    out, right = [], []
     common = ev.common_scale
     if common < 0:
         unit = f"; and {scale_factor_hint(1 / -common)}" if common != -1.0 else ""
+        told = [r for r, v in signs.items() if v is not None]
+        if told and all(signs[r] > 0 for r in told):
+            right.append("*")
+            runs = "" if len(told) == len(signs) else f" in run(s) {', '.join(told)}"
+            why = signed_right.format(runs)
+        else:
+            why = reversed_
         out.append(f"every mode is in antiphase with the model at the hit point (modal constants {common:.3g} "
-                   f"times those the model predicts): {reversed_}{unit}; labels were made at the recording's "
+                   f"times those the model predicts): {why}{unit}; labels were made at the recording's "
                    "own scale and sign")
     elif common != 1.0:
         # constants s times the model's: the data of a body 1/s times the carriage's mass (1000: a prefix, 9.81: g)
@@ -482,13 +535,16 @@ def _scale_warnings(ev, mass_kg: float) -> list[str]:
                    "the recording's own scale)")
     for run, factor in ev.run_factors.items():
         parts = [f"its modal constants are {factor:.3g} times the other runs', every mode alike"]
-        if factor < 0:
+        if factor < 0 and signs.get(run) is not None and signs[run] > 0:
+            right.append(run)
+            parts.append(f"every mode in antiphase with theirs, {signed_right.format('')}")
+        elif factor < 0:
             parts.append(f"every mode in antiphase with theirs: in this run {reversed_}")
         if not 1 / COMMON_SCALE_FACTOR <= abs(factor) <= COMMON_SCALE_FACTOR:
             parts.append(f"{scale_factor_hint(1 / abs(factor))}, in this run's force or accelerometer calibration")
         out.append(f"run '{run}': {'; '.join(parts)}; labels were made with each run at its own scale and sign; "
                    "K and c do not depend on it")
-    return out
+    return out, tuple(right)
 
 
 def _labelled(gf, candidates, per_run, frf_by_run, geometry, model, band, mass_kg) -> ModalResult:
@@ -503,7 +559,7 @@ def _labelled(gf, candidates, per_run, frf_by_run, geometry, model, band, mass_k
     predicted = lab_mod.predicted_constants(model, views)
     ev = lab_mod.evidence(measured, views, model, predicted)
     decided = lab_mod.label_modes(measured, views, model, predicted, ev)
-    warnings = _scale_warnings(ev, mass_kg)
+    warnings, signed_right = _scale_warnings(ev, mass_kg, driving_point_signs(candidates, views))
     visible = dict(zip(model.labels, lab_mod.visible_modes(predicted)))
     modes, extras = [], []
     for c, dec in zip(candidates, decided):
@@ -563,7 +619,7 @@ def _labelled(gf, candidates, per_run, frf_by_run, geometry, model, band, mass_k
             warnings.append(f"model mode '{lab}' ({model.frequency_hz(lab):.0f} Hz) not observed in any run")
     missing = [lab for lab in missing if lab not in told]
     return ModalResult(sorted(modes, key=lambda m: m.frequency_hz), sorted(extras, key=lambda m: m.frequency_hz),
-                       missing, gf, per_run, band, tuple(warnings))
+                       missing, gf, per_run, band, tuple(warnings), antiphase_signed_right=signed_right)
 
 
 def _candidate_labels(extras) -> dict:

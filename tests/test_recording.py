@@ -587,6 +587,22 @@ def test_csv_time_column_gives_rate_and_units_line(tmp_path):
     np.testing.assert_array_equal(run.force_channel.position_m, [0, 0, 0])  # no excitation position
 
 
+def test_csv_without_hit_point_leaves_it_unknown(tmp_path):
+    """The contract gives no default hit point: a CSV with neither excitation_position_m nor positions_m
+    does not say where the hammer hit (identify warns; the force channel is only placed at the origin)."""
+    text = "# sample_rate_hz: 1000\n# excitation_direction: 0 -1 0\nforce,acc_A_y\n1,2\n3,4\n"
+    run = read_recording(write_text(tmp_path, text)).runs[0]
+    assert run.hit_position_m is None
+    from guidefit.consistency import unknown_hit_warnings
+
+    (line,) = unknown_hit_warnings(read_recording(write_text(tmp_path, text)))
+    assert "the hit point is unknown" in line
+    given = text.replace("force,", "# positions_m: 0.01 0 0; 0.03 0 0.045\nforce,")
+    np.testing.assert_allclose(read_recording(write_text(tmp_path, given)).runs[0].hit_position_m, [0.01, 0, 0])
+    declared = text.replace("force,", "# excitation_position_m: 0 0.01 0\nforce,")
+    np.testing.assert_allclose(read_recording(write_text(tmp_path, declared)).runs[0].hit_position_m, [0, 0.01, 0])
+
+
 def test_csv_crlf_bom_and_no_time_column(tmp_path):
     text = "\ufeff# sample_rate_hz: 2e5\r\n# excitation_direction: 0,-1,0\r\nforce,acc_D_z\r\n1,2\r\n3,4\r\n\r\n"
     path = tmp_path / "rec.csv"

@@ -105,6 +105,21 @@ def test_the_example_setup_reads_as_a_recording(folder):
     assert [ch.unit for ch in vertical.channels] == ["N", "g", "m/s^2"]
 
 
+def test_a_run_without_hit_point_has_it_unknown(folder):
+    """Neither the run's excitation_position_m nor the force channel's position_m: the contract gives no
+    default, so the hit point is unknown (not the origin the force channel is placed at); either one
+    declares it."""
+    (folder / "test.toml").write_text(GOOD)
+    vertical, lateral = read_recording("test.toml").runs
+    np.testing.assert_allclose(vertical.hit_position_m, [0.020, 0.0, 0.035])
+    assert lateral.hit_position_m is None
+    text = edit(GOOD, "sensitivity_mv = 2.25", "sensitivity_mv = 2.25\nposition_m = [0.05, -0.012, 0.006]")
+    (folder / "test.toml").write_text(text)
+    vertical, lateral = read_recording("test.toml").runs
+    np.testing.assert_allclose(lateral.hit_position_m, [0.05, -0.012, 0.006])
+    np.testing.assert_allclose(vertical.hit_position_m, [0.020, 0.0, 0.035])
+
+
 def test_positions_directions_channels_and_scale_as_given(folder):
     text = edit(GOOD, "sensitivity_mv = 1.04", "scale = -2.0\nposition_m = [0.01, 0.02, 0.03]\n"
                                                 "direction = [0.0, -1.0, 0.0]")

@@ -159,6 +159,8 @@ def _read_csv_stream(p: Path, display: str, fh) -> Recording:
         source=ArraySource(data),
         force_index=force_index,
         file=display,
+        # the contract gives no default hit point: without excitation_position_m or positions_m it is unknown
+        force_position_known=exc_pos is not None or "positions_m" in meta,
     )
     return Recording(path=display, guide=guide, description=description, runs=(run,))
 

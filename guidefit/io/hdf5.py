@@ -727,9 +727,11 @@ def write_hdf5(path, recording, *, compression: str | None = None) -> None:
     for run in recording.runs:
         if isinstance(run, Run) and run.hit_position_m is None:  # read from a file that does not say where
             raise RecordingError(
-                f"{display}: run '{run.name}': the hit point is unknown (the source file gives no coordinates "
-                "for the reference node); a recording would put it at the force channel's position. Give it: "
-                "a test setup with excitation_position_m (docs/recordings.md), or the node's coordinates in the file"
+                f"{display}: run '{run.name}': the hit point is unknown (the source file gives neither "
+                "excitation_position_m nor the force channel's position, nor the reference node's coordinates); "
+                "a recording would put it at the force channel's position. Give it: excitation_position_m (a "
+                "test setup's run table or a CSV '# excitation_position_m:' line, docs/recordings.md), or the "
+                "node's coordinates in the file"
             )
     _atomic(Path(display), lambda tmp: _write_hdf5(tmp, display, recording, compression))
 

@@ -69,7 +69,7 @@ import difflib
 import math
 import os
 import stat
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -670,7 +670,12 @@ def _make_run(setup: Setup, run: SetupRun, daq: DaqFile, picked) -> Run:
     dcs = tuple(dc for _, dc in picked)
     source = daq.make_source(dcs, common_dtype(dc.dtype for dc in dcs))
     scale = [(FORCE_UNITS if ch.name == "force" else ACCELERATION_UNITS)[ch.unit] * ch.factor for ch in chans]
-    return Run.from_header(header, source, n_samples=n, file=run.display, scale_to_si=scale)
+    made = Run.from_header(header, source, n_samples=n, file=run.display, scale_to_si=scale)
+    # the contract gives no default hit point: with neither excitation_position_m nor the force
+    # channel's position_m it is unknown (not the origin the force channel is placed at)
+    known = run.excitation_position_m is not None or any(ch.name == "force" and ch.position_m is not None
+                                                          for ch in chans)
+    return made if known else replace(made, force_position_known=False)
 
 
 def read_setup(p: Path, display: str) -> Recording:
