@@ -825,9 +825,11 @@ def _force_level_runs(collected) -> dict:
     record length whose mean accepted peak forces differ by
     :data:`LEVEL_FORCE_RATIO` are levels of one test.
     """
+    from guidefit.io.records import hit_point_of
+
     groups: dict = {}
     for run, frf, rows in collected:
-        pos = run.excitation_position_m
+        pos = hit_point_of(run)
         key = (None if pos is None else tuple(np.round(np.asarray(pos, float), 4)),
                tuple(np.round(np.asarray(run.excitation_direction, float), 3)), tuple(frf.channels),
                float(run.sample_rate_hz), int(getattr(run, "n_samples", 0) or 0))

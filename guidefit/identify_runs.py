@@ -25,6 +25,7 @@ import numpy as np
 
 from guidefit.errors import IdentificationError
 from guidefit.frf.windows import undo_window_damping
+from guidefit.io.records import hit_point_of
 from guidefit.model.vibration import JOINT_LABELS, UNNAMED_LABELS
 from guidefit.modes.labels import sensor_matrix
 from guidefit.modes.shapes import (
@@ -337,9 +338,9 @@ def _fit_run(run, frf, guide, model, settings) -> tuple[list[IdentifiedMode], li
     candidates = _significant(candidates)
     from guidefit.modes import labels as lab_mod
 
+    hit = hit_point_of(run)
     view = {run.name: lab_mod.RunView(frf_channels(run, frf), tuple(run.excitation_direction),
-                                      None if run.excitation_position_m is None
-                                      else tuple(run.excitation_position_m))}
+                                      None if hit is None else tuple(hit))}
     decided = lab_mod.label_modes([lab_mod.Measured(float(c["frequency_hz"]), {run.name: c["shape"]})
                                    for c in candidates], view, model)
     out = []
@@ -426,8 +427,8 @@ def _force_levels(run, frf, rows, modes, settings) -> tuple[list[dict], list[str
                      "peak_force_n": float(np.mean(forces[members])),
                      "n_hits": int(len(members)), "hit_forces_n": [float(x) for x in np.sort(forces[members])],
                      "frequency_hz": None, "frequency_std_hz": None, "band_hz": [float(x) for x in band],
-                     "hit_position_m": None if run.excitation_position_m is None
-                     else [float(x) for x in run.excitation_position_m],
+                     "hit_position_m": None if hit_point_of(run) is None
+                     else [float(x) for x in hit_point_of(run)],
                      "hit_direction": [float(x) for x in run.excitation_direction]}
             if r is None:  # the mode is not reproduced by this bin's hits: a level without a frequency
                 level["refit_failed"] = True

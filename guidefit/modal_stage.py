@@ -95,11 +95,14 @@ class ModalResult:
 
 
 def geometry_of(run, frf) -> RunGeometry:
-    """:class:`RunGeometry` of a recording's run, channels in the FRF's order."""
+    """:class:`RunGeometry` of a recording's run, channels in the FRF's order; the hit point is the
+    contract's (:func:`hit_point_of`: a file may give it as the force channel's position only)."""
     by_name = {ch.name: ch for ch in run.channels}
+    from guidefit.io.records import hit_point_of
+
+    hit = hit_point_of(run)
     return RunGeometry(run.name, tuple(by_name[c] for c in frf.channels), tuple(run.excitation_direction),
-                       None if run.excitation_position_m is None else tuple(run.excitation_position_m),
-                       getattr(run, "sample_rate_hz", None))
+                       None if hit is None else tuple(hit), getattr(run, "sample_rate_hz", None))
 
 
 def global_band(model, frf_by_run: dict, geometry: dict, settings) -> tuple[float, float]:

@@ -538,3 +538,18 @@ def test_gate_in_the_html_report_exit_1(real_recording, tmp_path):
     assert len(lines) == 1 and lines[0].startswith("guidefit: identification rejected: ")
     html = out_path.read_text()
     assert "Identification rejected" in html
+
+
+@pytest.mark.parametrize("layout", ["single", "pair"])
+def test_hit_point_given_only_by_the_force_channel_position(tmp_path, layout):
+    """The contract's hit point is ``excitation_position_m``, else the force channel's position
+    (``positions_m`` of ``force``, required). Was: the labeller read ``excitation_position_m`` only,
+    so a file without it (as an independent writer may make) had its hit point taken as unknown:
+    on one accelerometer per run every mode but roll_high was 'ambiguous', f_V, f_H, K_V, K_H null,
+    'identification rejected' (exit 1) on a valid test that gave every number within 0.02 % with it."""
+    data, truth = simulate("MRB35", config=SimulationConfig(hits=2, record_s=0.02, sensor_layout=layout), seed=3)
+    runs = tuple(replace(run, excitation_position_m=None) for run in data.runs)
+    assert all(r.positions_m[r.channel_names.index("force")] is not None for r in runs)
+    result, _ = _identify(tmp_path, replace(data, runs=runs))
+    assert result.gate is None and not result.unidentified
+    _accurate(result, truth)

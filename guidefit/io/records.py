@@ -773,3 +773,10 @@ def open_reader(run: Run) -> Iterator[RunReader]:
         except _READ_ERRORS as exc:
             raise _read_error(run, exc) from None
         yield RunReader(run, handle)
+
+
+def hit_point_of(run) -> np.ndarray | None:
+    """A run's hit point, m: the contract's (``excitation_position_m``, else the force channel's
+    position: :attr:`guidefit.io.records.Run.hit_position_m`); None when the file does not give it."""
+    pos = run.hit_position_m if hasattr(run, "hit_position_m") else getattr(run, "excitation_position_m", None)
+    return None if pos is None else np.asarray(pos, dtype=float)

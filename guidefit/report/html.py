@@ -228,8 +228,10 @@ def _header(res: ReportResults) -> list[str]:
              "<p>The same results as these commands (the report runs their calls with these settings):</p>",
              "<ul>" + "".join(f"<li><code>{_e(c)}</code></li>" for c in _command_lines(res)) + "</ul>",
              "<h2>Settings</h2>", _table(["setting", "value"], _settings_rows(res), table_cls="meta")]
+    from guidefit.io.records import hit_point_of
+
     runs = [[r.name, f"{r.sample_rate_hz:g}", " ".join(f"{x:g}" for x in r.excitation_direction),
-             "-" if r.excitation_position_m is None else " ".join(f"{1e3 * x:g}" for x in r.excitation_position_m),
+             "-" if hit_point_of(r) is None else " ".join(f"{1e3 * x:g}" for x in hit_point_of(r)),
              r.layout, r.n_hits_stored or "-"] for r in rec.runs]
     parts += ["<h2>Runs and sensors</h2>",
               _table(["run", "sample rate (Hz)", "excitation direction", "hit point (mm)", "layout", "stored hits"],
