@@ -166,6 +166,7 @@ CSV_VARIANTS = {
     "rate_with_decimals": lambda t: t.replace("# sample_rate_hz: 200000", "# sample_rate_hz: 200000.0"),
     "rate_in_e_notation": lambda t: t.replace("# sample_rate_hz: 200000", "# sample_rate_hz: 2e5"),
     "quoted_header": lambda t: _quote(t, header_only=True),
+    "every_field_quoted": lambda t: _quote(t, header_only=False),
 }
 
 

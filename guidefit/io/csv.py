@@ -365,7 +365,9 @@ def _csv_numbers(fh, first_no: int, names: list[str], display: str, max_rows: in
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", UserWarning)  # a block of blank lines: no data
-                block = np.loadtxt(lines, delimiter=",", comments=None, dtype=np.float64, ndmin=2)
+                # quotechar: a field may be quoted ("1.5"), as CSV writers do (QUOTE_ALL, QUOTE_NONNUMERIC)
+                block = np.loadtxt(lines, delimiter=",", comments=None, dtype=np.float64, ndmin=2,
+                                   quotechar='"')
         except ValueError as exc:
             raise _csv_locate_error(lines, block_no, names, display, exc) from None
         if block.size:
@@ -399,6 +401,7 @@ def _csv_locate_error(data_lines, first_no, names, display, exc) -> RecordingErr
                 f"{where}: fields separated by ';'; expected ',' between fields and '.' as decimal mark"
             )
         tokens = [t.strip() for t in line.split(",")]
+        tokens = [t[1:-1].strip() if len(t) > 1 and t[0] == t[-1] == '"' else t for t in tokens]
         if len(tokens) != n:
             hint = (
                 comma_hint
