@@ -626,6 +626,9 @@ def plausibility(modes, missing, sets: list[ShapeSet], model) -> str | None:
         if m is not None and not any(v > 0 for v in m.energy.values()):
             return (f"no sensor sees carriage motion in the {label} mode at {m.frequency_hz:.0f} Hz: its label rests "
                     "on its frequency alone, and the recording may not be of this guide")
+    far = _frequency_alone_far(by_label, sets, model)
+    if far:
+        return far
     observable = observable_modes(model, sets)
     lost = sorted(lab for lab in missing if lab in observable)
     if len(lost) >= 2 and 2 * len(lost) > len(observable):
@@ -648,6 +651,28 @@ def plausibility(modes, missing, sets: list[ShapeSet], model) -> str | None:
         worst = max(joint_bad or bad, key=lambda r: r[4])
         return (f"{len(bad)} of {len(strong)} strong mode shapes are not rigid-body motions of the carriage (run "
                 f"'{worst[0]}', {worst[2]:.0f} Hz: {100 * worst[4]:.0f} % of it off the best rigid fit)")
+    return None
+
+
+#: on one accelerometer in one run, a joint mode's label rests on its frequency: at most this factor off the model's
+SINGLE_CHANNEL_FREQUENCY_FACTOR = 1.5
+
+
+def _frequency_alone_far(by_label: dict, sets: list[ShapeSet], model) -> str | None:
+    """Why a recording of one accelerometer in one run is not trusted: a joint mode labelled more than
+    :data:`SINGLE_CHANNEL_FREQUENCY_FACTOR` from the model's frequency (one channel tells no shape: every MAC
+    is 1, and another structure's modes get the carriage's labels by elimination), or None."""
+    if sum(len(s.channels) for s in sets) != 1:
+        return None
+    for label in JOINT_LABELS.values():
+        m = by_label.get(label)
+        if m is None or label not in model.labels:
+            continue
+        ratio = float(m.frequency_hz) / model.frequency_hz(label)
+        if not 1 / SINGLE_CHANNEL_FREQUENCY_FACTOR <= ratio <= SINGLE_CHANNEL_FREQUENCY_FACTOR:
+            return (f"one accelerometer in one run tells no mode shape, and the {label} mode's "
+                    f"{m.frequency_hz:.0f} Hz is {ratio:.2f} times the model's {model.frequency_hz(label):.0f} Hz: "
+                    "its label rests on its frequency alone, and the recording may not be of this guide")
     return None
 
 

@@ -214,23 +214,21 @@ def test_csv_outside_the_contract_is_one_line_exit_2(tmp_path, default_layout, k
     assert message in result.stderr and len(result.stderr.strip().splitlines()) == 1
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "open: taking yaw's 6e-32 reading as rounding (relative to every model mode's readings, not its own) labels "
-    "this file right (f_V, K_V within 0.02 %), but then the pyFRF data of another structure entered as one "
-    "vertical accelerometer on MRB35 (tests/test_consistency.py::test_gate_on_real_data_of_another_structure) "
-    "passes the gate with K_V 3.09e9, exit 0: the 1e30 scale is what rejects it now; the gate needs another "
-    "ground for one-sensor files first"))
 def test_one_run_one_accelerometer_file_is_labelled(tmp_path):
-    """Was: a file holding only the vertical run of the 'single' layout (one accelerometer, A along y) had no
-    mode labelled and was rejected as 'does not look like a carriage on this guide' (exit 1), with 'the modal
-    constants are 1.49e+30 times those the model predicts': yaw's predicted reading there, 6e-32 (rounding),
-    was measured against itself, not against the other modes' readings, and kept as a reading."""
+    """Was: a file holding one run of the 'single' layout (one accelerometer at A) had its modes labelled by
+    rounding: with one channel every model mode fits the shape (MAC 1) and the common scale took the first
+    in floating-point order. Vertical run: yaw (predicted reading 6e-32), 'modal constants 1.49e+30 times
+    those the model predicts', no mode labelled, rejected 'does not look like a carriage' (exit 1); lateral
+    run stored as float32 (guidefit's own writer): 'modal constants 3.95 times', f_H lost, exit 1, while the
+    same values as float64 gave f_H. Now the tie goes to the model mode nearest in frequency."""
     data, truth = simulate("MRB35", config=SimulationConfig(hits=2, record_s=0.02, sensor_layout="single"), seed=3)
-    path = tmp_path / "vertical_only.h5"
-    W.write_h5(path, data, run_order=["vertical"])
-    result = identify(path, settings=FAST)
-    assert not any("times those the model predicts" in w for w in result.warnings)
-    _within(result.parameters, truth, keys=("f_V", "K_V"))
+    for run, dtype, keys in (("vertical", "float64", ("f_V", "K_V")), ("lateral", "float32", ("f_H", "K_H")),
+                             ("lateral", "float64", ("f_H", "K_H"))):
+        path = tmp_path / f"{run}_{dtype}.h5"
+        W.write_h5(path, data, run_order=[run], dtype=dtype)
+        result = identify(path, settings=FAST)
+        assert not any("times those the model predicts" in w for w in result.warnings), (run, dtype)
+        _within(result.parameters, truth, keys=keys)
 
 
 @pytest.mark.xfail(strict=True, reason=(

@@ -317,7 +317,7 @@ def evidence(measured: list[Measured], runs: dict, model, predicted: list[dict] 
     for (k, i), (r, sc, prior) in fits.items():
         j = int(np.argmin(r / SHAPE_RHO_SCALE + prior))
         rho[k, i], raw[k, i] = r[j], sc[j]
-    best = [(int(np.argmin(rho[k])), k) for k in range(n)] if n_model else []
+    best = [(_best_model_mode(rho[k], measured[k].frequency_hz, model), k) for k in range(n)] if n_model else []
     good = [raw[k, i] for i, k in best if 1.0 - rho[k, i] >= SCALE_MAC and np.isfinite(raw[k, i])]
     common = float(np.median(good)) if len(good) >= 2 else (float(good[0]) if good else 1.0)
     if not (abs(common) > 0 and abs(math.log(abs(common))) > math.log(COMMON_SCALE_FACTOR)):
@@ -331,6 +331,17 @@ def evidence(measured: list[Measured], runs: dict, model, predicted: list[dict] 
     f_model = np.asarray(model.frequencies_hz, float).reshape(1, -1)
     freq_cost = np.log(f_meas / f_model) ** 2 / (2 * FREQUENCY_LOG_STD**2)
     return Evidence(rho, raw / common, shape_cost, freq_cost, visible_modes(predicted), common, run_factors)
+
+
+def _best_model_mode(rho_k: np.ndarray, frequency_hz: float, model) -> int:
+    """The model mode whose shape fits a measured mode best; of those within :data:`SCALE_MAC_TIE` of the best
+    (one sensor: every MAC is 1, the order decided by rounding), the nearest in frequency."""
+    i = int(np.argmin(rho_k))
+    tied = np.flatnonzero(rho_k <= rho_k[i] + SCALE_MAC_TIE)
+    if tied.size > 1:
+        f_model = np.asarray(model.frequencies_hz, float)[: rho_k.size]
+        i = int(tied[np.argmin(np.abs(np.log(f_model[tied] / frequency_hz)))])
+    return i
 
 
 #: a mode whose modal constants in a run are below this fraction of the run's strongest has no say in its scale
