@@ -327,6 +327,7 @@ def identify(path, guide=None, settings: IdentifySettings | None = None) -> Iden
     recording = source.recording if from_frfs else source
     guide, model = guide_and_model(recording, guide)
     frfs = frf_stage(source, settings, frf_top_hz(model, settings))
+    recording = _as_computed(recording, frfs)
     if not frfs.collected:
         raise identification_failure(f"{path}: no run gave an FRF", frfs.warnings)
     fit = modal_fit(frfs.collected, guide, model, settings)
@@ -335,6 +336,17 @@ def identify(path, guide=None, settings: IdentifySettings | None = None) -> Iden
     warnings = (*frfs.warnings, *fit.warnings, *level_warnings)
     return conclude(path, recording, guide, model, settings, fit, runs, warnings,
                     failed_rows=frfs.failed_rows, hits_checked=not from_frfs)
+
+
+def _as_computed(recording, frfs: FrfStage):
+    """``recording`` with its runs as the FRF stage read them (a run read with the hammer's sign turned:
+    :func:`_pushed_against`), so that every later stage sees one geometry."""
+    from dataclasses import replace
+
+    read = {run.name: run for run, _, _ in frfs.collected}
+    if all(read.get(run.name, run) is run for run in recording.runs):
+        return recording
+    return replace(recording, runs=tuple(read.get(run.name, run) for run in recording.runs))
 
 
 def guide_and_model(recording, guide=None):
@@ -397,6 +409,7 @@ def run_frfs(recording, settings: IdentifySettings, max_frequency_hz: float | No
             raise RecordingError(f"{run.file}: run '{run.name}': no acceleration channel; an FRF needs "
                                  "'force' and at least one 'acc_<point>_<axis>'")
         frf, rows, notes = _run_frf(run, settings, max_frequency_hz)
+        run, frf, rows, notes = _pushed_against(run, frf, rows, notes, settings, max_frequency_hz)
         warnings.extend(notes)
         if frf is None:
             failed.extend(rows)
@@ -452,6 +465,51 @@ def _run_frf(run, settings: IdentifySettings, max_frequency_hz):
     if n_ok < settings.min_accepted_hits:
         notes.append(f"run '{run.name}': only {n_ok} accepted hit(s); uncertainties are unreliable")
     return frf, rows, notes
+
+
+def _pushed_against(run, frf, rows, notes, settings: IdentifySettings, max_frequency_hz):
+    """A run whose force pulses are mostly negative, read as the same test with the hammer's sign turned.
+
+    The contract's sign: a positive force sample is a force on the carriage
+    along ``excitation_direction``. A writer that declares the axis the
+    other way round (the hammer pushing along -excitation_direction) gives
+    negative pulses: the same physics as the direction and the samples both
+    turned, which a hammer (it can only push) makes positive. When more of
+    the run's hits are rejected as ``negative`` than accepted, the run is
+    read again so (:func:`hammer_turned`), and kept so if more hits are
+    accepted, with a line that says it; a run with a few negative pulses
+    among positive ones keeps them rejected. Returns ``(run, frf, rows,
+    notes)``, the run as its FRFs were computed.
+    """
+    negative = sum(1 for r in rows if str(r.get("reason") or "").startswith("negative"))
+    accepted = sum(1 for r in rows if r["accepted"])
+    if negative <= accepted:
+        return run, frf, rows, notes
+    turned = hammer_turned(run)
+    frf_t, rows_t, notes_t = _run_frf(turned, settings, max_frequency_hz)
+    if sum(1 for r in rows_t if r["accepted"]) <= accepted:
+        return run, frf, rows, notes
+
+    def vec(v):
+        return "(" + ", ".join(f"{float(x) + 0.0:g}" for x in v) + ")"
+
+    line = (f"run '{run.name}': {negative} of {len(rows)} force pulses are negative: the hammer pushes against "
+            f"excitation_direction {vec(run.excitation_direction)}; read as pushed along "
+            f"{vec(turned.excitation_direction)} with the force's sign turned (the same test: a positive force "
+            "sample is a force along excitation_direction)")
+    return turned, frf_t, rows_t, [line, *notes_t]
+
+
+def hammer_turned(run):
+    """``run`` with its excitation direction and its force channel (direction and sign) turned: the same
+    test written with the other sign convention (:func:`_pushed_against`)."""
+    from dataclasses import replace
+
+    fi = run.force_index
+    force = run.channels[fi]
+    force = replace(force, direction=-np.asarray(force.direction, dtype=float), scale_to_si=-force.scale_to_si)
+    channels = tuple(force if i == fi else ch for i, ch in enumerate(run.channels))
+    return replace(run, excitation_direction=-np.asarray(run.excitation_direction, dtype=float), channels=channels)
 
 
 def _compute_frf(run, hits, settings: IdentifySettings, max_frequency_hz, n_fft=None):
