@@ -133,7 +133,9 @@ def test_g_file_gives_the_same_frf_as_the_si_file_and_both_the_true_one(tmp_path
 
 def _all_hits_rejected_in_vertical(tmp_path):
     spec = _two_runs(n_hits=3)
-    spec["vertical"]["data"][..., 0] *= -1  # every vertical hit pushes against excitation_direction
+    # every vertical hit's force corrupt (a NaN): rejected 'non_finite'. (Pulses that are all negative
+    # no longer do: that is the contract's other sign convention, read with the hammer's sign turned.)
+    spec["vertical"]["data"][..., 5, 0] = np.nan
     return gen.write_file(tmp_path / "neg.h5", spec)
 
 
@@ -147,7 +149,7 @@ def test_hits_of_a_run_without_frf_are_listed_as_rejected(tmp_path):
     rows = result.hit_rows()
     vertical = [h for h in rows if h["run"] == "vertical"]
     assert len(vertical) == 3 and not any(h["accepted"] for h in vertical)
-    assert all(h["reason"].startswith("negative") for h in vertical)
+    assert all(h["reason"].startswith("non_finite") for h in vertical)
     assert result.to_dict()["hits"] == rows
     assert result.parameters["f_V"]["value"] is None  # nothing made up from the rejected run
     assert result.parameters["f_H"]["value"] == pytest.approx(F_H, rel=2e-4)
@@ -212,7 +214,7 @@ def test_identify_json_has_the_contract_fields_for_every_file_even_a_failed_one(
     good = gen.write_file(tmp_path / "good.h5", _two_runs())
     spec = _two_runs()
     for r in spec.values():
-        r["data"][..., 0] *= -1
+        r["data"][..., 5, 0] = np.nan  # every hit's force corrupt: every hit rejected
     rejected = gen.write_file(tmp_path / "all_rejected.h5", spec)
     folder = tmp_path / "folder.h5"
     folder.mkdir()
