@@ -596,14 +596,15 @@ def unknown_hit_warnings(recording) -> list[str]:
         force = np.asarray(r.force_channel.position_m, float)
         apart = float(np.linalg.norm(np.asarray(given, float) - force))
         if apart > HIT_POINT_TOLERANCE_M:
-            out.append(f"run '{r.name}': excitation_position_m {_vec(given)} and the force channel's position "
-                       f"{_vec(force)} are {apart * 1000:.0f} mm apart; both are the hit point: the labels and "
+            out.append(f"run '{r.name}': excitation_position_m {vector_text(given)} and the force channel's position "
+                       f"{vector_text(force)} are {apart * 1000:.0f} mm apart; both are the hit point: the labels and "
                        "the modal-constant checks use excitation_position_m (correct the one that is wrong)")
     return out
 
 
-def _vec(v) -> str:
-    return "(" + ", ".join(format(float(x), "g") for x in np.asarray(v, float)) + ")"
+def vector_text(v) -> str:
+    """A vector for a message: ``(0, -1, 0)`` (no ``-0``)."""
+    return "(" + ", ".join(format(float(x) + 0.0, "g") for x in np.asarray(v, float)) + ")"
 
 
 def plausibility(modes, missing, sets: list[ShapeSet], model) -> str | None:

@@ -81,6 +81,7 @@ def hammer_lines(sets, model, recording=None) -> tuple[dict, dict]:
     along a carriage axis at the same point leaves less than :data:`OTHER_AXIS_SHARE`), and the same line for
     every run with any such mode that a hit along another axis would explain better (added to a rejected or
     incomplete identification's line: a hint, not a verdict)."""
+    from guidefit.consistency import vector_text
     from guidefit.modes.labels import driving_row
 
     runs = {r.name: r for r in getattr(recording, "runs", ())}
@@ -93,7 +94,7 @@ def hammer_lines(sets, model, recording=None) -> tuple[dict, dict]:
         run = runs.get(s.run)
         hit = getattr(run, "hit_position_m", None)
         others = [contradicted_modes(s, model, driving_row(axis, hit))[1] for axis in np.eye(3)] if hit is not None else []
-        direction = _vec(run.excitation_direction) if run is not None else "?"
+        direction = vector_text(run.excitation_direction) if run is not None else "?"
         where = (f"runs.{s.run}.excitation_direction in {Path(recording.path).name}" if setup
                  else f"the excitation_direction of run '{s.run}'")
         modes = ", ".join(f"{f:.0f} Hz ({'/'.join(labels)})" for f, labels in bad)
@@ -106,6 +107,3 @@ def hammer_lines(sets, model, recording=None) -> tuple[dict, dict]:
                 strong[s.run] = line
     return strong, weak
 
-
-def _vec(v) -> str:
-    return "(" + ", ".join(format(float(x), "g") for x in np.asarray(v, float)) + ")"

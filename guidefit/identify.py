@@ -424,7 +424,7 @@ def _on_common_grid(collected: tuple, settings: IdentifySettings, max_frequency_
     hits with each windowed record zero-padded to the longest record's duration; a run whose FRFs reach
     higher (a higher sample rate) is cut to the common top. Runs that share one grid already: unchanged,
     nothing computed again."""
-    from guidefit.frf import _record_length, common_grid, first_bins
+    from guidefit.frf import common_grid, fft_length, first_bins
     from guidefit.hits import HitSettings, iter_hits
 
     plan = common_grid([frf for _, frf, _ in collected], max_frequency_hz)
@@ -432,7 +432,7 @@ def _on_common_grid(collected: tuple, settings: IdentifySettings, max_frequency_
         return collected
     out = []
     for (run, frf, rows), (n_fft, bins) in zip(collected, plan):
-        if n_fft != _record_length(frf):
+        if n_fft != fft_length(frf):
             top = float((bins - 0.5) * frf.sample_rate_hz / n_fft)  # between the last bin kept and the next
             frf = _compute_frf(run, iter_hits(run, settings.hits or HitSettings()), settings, top, n_fft)
         out.append((run, first_bins(frf, bins), rows))
@@ -489,13 +489,11 @@ def _pushed_against(run, frf, rows, notes, settings: IdentifySettings, max_frequ
     frf_t, rows_t, notes_t = _run_frf(turned, settings, max_frequency_hz)
     if sum(1 for r in rows_t if r["accepted"]) <= accepted:
         return run, frf, rows, notes
-
-    def vec(v):
-        return "(" + ", ".join(f"{float(x) + 0.0:g}" for x in v) + ")"
+    from guidefit.consistency import vector_text
 
     line = (f"run '{run.name}': {negative} of {len(rows)} force pulses are negative: the hammer pushes against "
-            f"excitation_direction {vec(run.excitation_direction)}; read as pushed along "
-            f"{vec(turned.excitation_direction)} with the force's sign turned (the same test: a positive force "
+            f"excitation_direction {vector_text(run.excitation_direction)}; read as pushed along "
+            f"{vector_text(turned.excitation_direction)} with the force's sign turned (the same test: a positive force "
             "sample is a force along excitation_direction)")
     return turned, frf_t, rows_t, [line, *notes_t]
 
@@ -795,6 +793,8 @@ def _amplitude_lines(fit: ModalFit, runs, settings: IdentifySettings, rejected: 
     """Amplitude dependence (:func:`guidefit.identify_runs.amplitude_dependence`) of each fitted run, looked
     for only when the fit failed its gate or the labeller found the modes in antiphase with the model's
     while the driving points are signed right: one linear model does not fit, and this says why."""
+    from guidefit.hammer_check import STRONG
+
     res = fit.passed.modal
     if not rejected and (res is None or not res.antiphase_signed_right):
         return ()
@@ -807,7 +807,7 @@ def _amplitude_lines(fit: ModalFit, runs, settings: IdentifySettings, rejected: 
         size = {id(v): float(np.linalg.norm(list(m.shapes.get(r.name, {}).values()) or [0.0]))
                 for v, m in zip(views, res.modes + res.extras)}
         top = max(size.values(), default=0.0)
-        strong = [v for v in views if top > 0 and size[id(v)] >= 0.1 * top]  # the modes this run's hammer drives
+        strong = [v for v in views if top > 0 and size[id(v)] >= STRONG * top]  # the modes this run's hammer drives
         line = amplitude_dependence(run_of[r.name], r, strong, settings)
         if line is not None:
             out.append(line)

@@ -105,20 +105,16 @@ def _scale(s, model) -> float | None:
 def _matches(s, model) -> dict:
     """Frequency -> the set of model modes each mode of the run (at least :data:`MATCH_STRONG` of its
     strongest) matches (MAC >= SCALE_MAC, ties within SCALE_MAC_TIE), through the run's sensors and hit."""
-    from guidefit.modes.labels import SCALE_MAC, SCALE_MAC_TIE
+    from guidefit.modes.labels import SCALE_MAC, SCALE_MAC_TIE, mac_with_model, predicted_readings
 
-    phi = np.asarray(model.shapes)[:5]
-    R = (phi.T @ s.sensors.T) * (s.driving @ phi)[:, None]
-    R[np.abs(R) <= 1e-9 * float(np.abs(R).max(initial=0.0))] = 0.0
-    rr = np.einsum("ij,ij->i", R, R)
-    seen = rr > 1e-6 * float(rr.max(initial=0.0))
+    R, rr, seen = predicted_readings(_View(s.sensors, s.driving), np.asarray(model.shapes)[:5])
     top = max((float(m @ m) for m in s.shapes), default=0.0)
     out = {}
     for f, m in zip(s.frequencies_hz, s.shapes):
         mm = float(m @ m)
         if mm <= 0 or not np.any(seen) or mm < MATCH_STRONG**2 * top:
             continue
-        mac = np.where(seen, (R @ m) ** 2 / (np.where(seen, rr, 1.0) * mm), 0.0)
+        mac = mac_with_model(m, R, rr, seen)
         best = float(mac.max())
         if best >= SCALE_MAC:
             out[float(f)] = set(np.flatnonzero(mac >= best - SCALE_MAC_TIE).tolist())

@@ -218,6 +218,7 @@ __all__ = [
     "exponential_window",
     "exponential_window_damping_correction",
     "fft_dtype",
+    "fft_length",
     "first_bins",
     "force_window",
     "frf_from_records",
@@ -416,8 +417,9 @@ def top_of(frf) -> float | None:
     return float(f[-1] + 0.5 * (f[1] - f[0]))
 
 
-def _record_length(frf) -> int:
-    """The FFT length behind ``frf``'s bins: ``fs / df``."""
+def fft_length(frf) -> int:
+    """The FFT length behind ``frf``'s bins, ``fs / df`` (its records' length, or the padded one: a duck-typed
+    :attr:`guidefit.frfset.FrfSet.n_fft` that is never None)."""
     f = np.asarray(frf.frequency_hz, dtype=float)
     return int(round(float(frf.sample_rate_hz) / float(f[1] - f[0])))
 
@@ -472,7 +474,7 @@ def common_grid(frfs: Sequence, max_frequency_hz: float | None = None) -> list |
     if any(abs(r - round(r)) > 1e-9 * r for r in rates):
         return None
     step = 1.0 / math.gcd(*(int(round(r)) for r in rates))  # durations that are whole samples at every rate
-    longest = max(_record_length(frf) / r for frf, r in zip(frfs, rates))
+    longest = max(fft_length(frf) / r for frf, r in zip(frfs, rates))
     span = math.ceil(longest / step - 1e-9) * step
     n_fft = [int(round(r * span)) for r in rates]
     top = min(r / 2 for r in rates)

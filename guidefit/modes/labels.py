@@ -350,6 +350,23 @@ SCALE_STRONG = 0.1
 SCALE_MAC_TIE = 0.02
 
 
+def predicted_readings(run, phi: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(R, rr, seen)``: each model mode's predicted modal constants in ``run`` (its sensors and hammer
+    row ``run.drive``, not None), (model modes, channels), rounding residues set to 0; their squared
+    norms; and which model modes the run's hit and sensors show at all."""
+    R = (phi.T @ run.sensors.T) * (run.drive @ phi)[:, None]
+    R[np.abs(R) <= 1e-9 * float(np.abs(R).max(initial=0.0))] = 0.0  # rounding, not a reading
+    rr = np.einsum("ij,ij->i", R, R)
+    return R, rr, rr > 1e-6 * float(rr.max(initial=0.0))
+
+
+def mac_with_model(constants: np.ndarray, R: np.ndarray, rr: np.ndarray, seen: np.ndarray) -> np.ndarray:
+    """MAC of a measured mode's modal constants (channels,) with each model mode's predicted ones
+    (:func:`predicted_readings`); 0 for the model modes the run does not show."""
+    mm = float(constants @ constants)
+    return np.where(seen, (R @ constants) ** 2 / (np.where(seen, rr, 1.0) * mm), 0.0)
+
+
 def run_scale(constants: list, run, phi: np.ndarray, freqs=None, model_freqs=None) -> float | None:
     """The median scale of a run's well-fitting modes (MAC >= :data:`SCALE_MAC` with a model mode through
     the run's own sensors and hit, modal constants at least :data:`SCALE_STRONG` of the run's strongest)
@@ -361,10 +378,7 @@ def run_scale(constants: list, run, phi: np.ndarray, freqs=None, model_freqs=Non
     the top centre excites only the vertical mode: its run's scale came out 0.0002)."""
     if run.drive is None:
         return None
-    R = (phi.T @ run.sensors.T) * (run.drive @ phi)[:, None]  # (model modes, channels)
-    R[np.abs(R) <= 1e-9 * float(np.abs(R).max(initial=0.0))] = 0.0  # rounding, not a reading
-    rr = np.einsum("ij,ij->i", R, R)
-    seen = rr > 1e-6 * float(rr.max(initial=0.0))  # model modes this run's hit and sensors show at all
+    R, rr, seen = predicted_readings(run, phi)
     values = []
     top = max((float(m @ m) for m in constants), default=0.0)
     for j, m in enumerate(constants):
@@ -372,7 +386,7 @@ def run_scale(constants: list, run, phi: np.ndarray, freqs=None, model_freqs=Non
         if mm <= 0 or not np.any(seen) or mm < SCALE_STRONG**2 * top:
             continue  # a mode this run barely shows (noise through shared poles) has no say in its scale
         mr = R @ m
-        mac = np.where(seen, mr**2 / (np.where(seen, rr, 1.0) * mm), 0.0)
+        mac = mac_with_model(m, R, rr, seen)
         i = int(np.argmax(mac))
         tied = np.flatnonzero(mac >= mac[i] - SCALE_MAC_TIE)
         if tied.size > 1 and freqs is not None and model_freqs is not None:  # one sensor: every MAC is 1
